@@ -1,0 +1,37 @@
+"""`gpm`: the package's command line. Each subcommand lives in its own module, which provides
+``add_arguments(parser)`` and ``run(args) -> int``; this file only dispatches."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from grid_puzzle_localization.errors import UserError
+
+# name -> (module, one-line help). Modules are imported lazily so `gpm tile` does not pay for
+# matplotlib or rospy.
+COMMANDS: dict[str, tuple[str, str]] = {}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="gpm", description="Grid puzzle map localization tools.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name, (module, help_text) in COMMANDS.items():
+        cmd = sub.add_parser(name, help=help_text, description=help_text)
+        importlib.import_module(f"grid_puzzle_localization.{module}").add_arguments(cmd)
+        cmd.set_defaults(_module=module)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(importlib.import_module(f"grid_puzzle_localization.{args._module}").run(args) or 0)
+    except UserError as err:
+        print(f"gpm {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"gpm {args.command}: interrupted; no partial output was kept", file=sys.stderr)
+        return 130

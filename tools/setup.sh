@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Installs everything the package needs, idempotently and without prompts:
+# Debian packages first, then the Python packages Debian lacks into .venv.
+# Fast when everything is already there (one dpkg-query, one hash comparison).
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+apt_list="$root/tools/apt-packages.txt"
+req="$root/tools/requirements.txt"
+venv="$root/.venv"
+
+mapfile -t wanted < <(sed -e 's/#.*//' -e '/^\s*$/d' "$apt_list" | tr -d ' ')
+missing=()
+for pkg in "${wanted[@]}"; do
+  status=$(dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null || true)
+  [[ "$status" == "install ok installed" ]] || missing+=("$pkg")
+done
+if ((${#missing[@]})); then
+  echo "setup: installing Debian packages: ${missing[*]}"
+  sudo_cmd=()
+  [[ $(id -u) -eq 0 ]] || sudo_cmd=(sudo)
+  export DEBIAN_FRONTEND=noninteractive
+  "${sudo_cmd[@]}" apt-get update -qq
+  "${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+
+# The venv must come from Debian's Python: the pyenv python3 on PATH cannot see ROS modules.
+if [[ ! -x "$venv/bin/python3" ]]; then
+  echo "setup: creating $venv from /usr/bin/python3 (with system site packages for rospy)"
+  /usr/bin/python3 -m venv --system-site-packages "$venv"
+fi
+stamp="$venv/.requirements.sha256"
+want_hash=$(sha256sum "$req" | cut -d' ' -f1)
+if [[ ! -f "$stamp" || "$(cat "$stamp")" != "$want_hash" ]]; then
+  echo "setup: installing Python packages from $req"
+  "$venv/bin/python3" -m pip install -q --disable-pip-version-check -r "$req"
+  echo "$want_hash" >"$stamp"
+fi
