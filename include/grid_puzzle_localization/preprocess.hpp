@@ -18,18 +18,17 @@ struct PreprocessConfig {
 };
 
 struct PreprocessReport {
-  std::size_t input = 0;        ///< points given
-  std::size_t non_finite = 0;   ///< dropped: NaN or inf coordinate
-  std::size_t at_origin = 0;    ///< dropped: exactly (0, 0, 0), a sensor's "no return"
-  std::size_t out_of_range = 0; ///< dropped by the range crop
-  std::size_t output = 0;       ///< points returned
+  std::size_t input = 0;         ///< points given
+  std::size_t non_finite = 0;    ///< dropped: NaN or inf coordinate
+  std::size_t at_origin = 0;     ///< dropped: exactly (0, 0, 0), a sensor's "no return"
+  std::size_t out_of_range = 0;  ///< dropped by the range crop
+  std::size_t output = 0;        ///< points returned
 };
 
 /// Filters `input` (sensor frame, metres) into a new cloud. The voxel filter replaces the points of
 /// each occupied world-aligned voxel by their centroid, in order of first appearance, so the result is
 /// deterministic. Throws std::invalid_argument when `config` does not validate.
-PointCloud preprocess(const PointCloud& input, const PreprocessConfig& config,
-                      PreprocessReport* report = nullptr);
+PointCloud preprocess(const PointCloud& input, const PreprocessConfig& config, PreprocessReport* report = nullptr);
 
 /// Centroid voxel filter alone (leaf in metres, > 0).
 PointCloud voxelDownsample(const PointCloud& input, double leaf);

@@ -1,9 +1,10 @@
 // Standalone scan preprocessing (range crop, NaN/origin removal, voxel filter) as a nodelet, so the
 // localizer's filter can run in a driver's manager or be inspected in rviz.
 #include <nodelet/nodelet.h>
-#include <pluginlib/class_list_macros.hpp>
 #include <ros/ros.h>
 #include <sensor_msgs/PointCloud2.h>
+
+#include <pluginlib/class_list_macros.hpp>
 
 #include "grid_puzzle_localization/preprocess.hpp"
 #include "point_cloud_msg.hpp"
@@ -20,8 +21,7 @@ class PointsPreprocessorNodelet : public nodelet::Nodelet {
     pnh.param("voxel_size", config_.voxel_size, config_.voxel_size);
     const std::string problem = config_.validate();
     if (!problem.empty()) {
-      NODELET_FATAL("%s: bad parameters: %s fix them in the launch file or YAML", getName().c_str(),
-                    problem.c_str());
+      NODELET_FATAL("%s: bad parameters: %s fix them in the launch file or YAML", getName().c_str(), problem.c_str());
       throw std::invalid_argument(problem);
     }
     pub_ = nh.advertise<sensor_msgs::PointCloud2>("points_filtered", 5);
