@@ -40,7 +40,7 @@ def main() -> int:
             print(f"check_results: {suite} produced no test results in {results / suite}")
             ok = False
         ok = ok and suite_totals[1] == 0
-        totals = [a + b for a, b in zip(totals, suite_totals)]
+        totals = [a + b for a, b in zip(totals, suite_totals, strict=True)]
     print(f"{totals[0]} passed, {totals[1]} failed, {totals[2]} skipped")
     return 0 if ok else 1
 
