@@ -131,28 +131,32 @@ def _write_tiles(buffer: TileBuffer, directory: Path, s: float, header: PcdHeade
     empty = dataclasses.replace(header, data="binary", width=0, height=1, points=0).text()
     record = header.record_bytes
     entries = []
-    for tile in tqdm(buffer.drain(), desc="writing tiles", unit="tile", disable=not show):
-        name = tile_filename(tile.i, tile.j, s)
-        n = tile.points
-        text = empty.replace("\nWIDTH 0\n", f"\nWIDTH {n}\n").replace("\nPOINTS 0\n", f"\nPOINTS {n}\n")
-        _write_tile(directory / name, text.encode("ascii"), tile)
-        entries.append(
-            TileEntry(
-                key=(tile.i, tile.j),
-                stem=tile_stem(tile.i, tile.j, s),
-                file=name,
-                center=(tile_center(tile.i, s), tile_center(tile.j, s)),
-                points=n,
-                bounds={"min": tile.bounds_min.tolist(), "max": tile.bounds_max.tolist()},
-                bytes=len(text) + n * record,
-                data_bytes=n * record,
+    dir_fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)  # names resolve relative to it: no path work
+    try:
+        for tile in tqdm(buffer.drain(), desc="writing tiles", unit="tile", disable=not show):
+            name = tile_filename(tile.i, tile.j, s)
+            n = tile.points
+            text = empty.replace("\nWIDTH 0\n", f"\nWIDTH {n}\n").replace("\nPOINTS 0\n", f"\nPOINTS {n}\n")
+            _write_tile(dir_fd, name, text.encode("ascii"), tile)
+            entries.append(
+                TileEntry(
+                    key=(tile.i, tile.j),
+                    stem=tile_stem(tile.i, tile.j, s),
+                    file=name,
+                    center=(tile_center(tile.i, s), tile_center(tile.j, s)),
+                    points=n,
+                    bounds={"min": tile.bounds_min.tolist(), "max": tile.bounds_max.tolist()},
+                    bytes=len(text) + n * record,
+                    data_bytes=n * record,
+                )
             )
-        )
+    finally:
+        os.close(dir_fd)
     return entries
 
 
-def _write_tile(path: Path, header: bytes, tile: TileData) -> None:
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+def _write_tile(dir_fd: int, name: str, header: bytes, tile: TileData) -> None:
+    fd = os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644, dir_fd=dir_fd)
     try:
         head = [np.frombuffer(header, dtype=np.uint8)]
         if tile.spill is not None:
