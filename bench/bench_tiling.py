@@ -32,16 +32,17 @@ def cpu_model() -> str:
     return platform.processor()
 
 
-def run_child(args: list[str]) -> tuple[float, float]:
-    """(wall seconds, peak RSS MiB) of one child process."""
+def run_child(args: list[str]) -> tuple[float, float, dict]:
+    """(wall seconds, peak RSS MiB, the JSON summary it printed) of one child process."""
     start = time.perf_counter()
-    child = subprocess.Popen(args, stdout=subprocess.DEVNULL)
+    child = subprocess.Popen(args, stdout=subprocess.PIPE)
+    output = child.stdout.read()
     _, status, usage = os.wait4(child.pid, 0)
     seconds = time.perf_counter() - start
-    child.returncode = os.waitstatus_to_exitcode(status)
-    if child.returncode != 0:
-        raise SystemExit(f"bench_tiling: {' '.join(args)} failed with status {child.returncode}")
-    return seconds, usage.ru_maxrss / 1024.0  # ru_maxrss is in KiB on Linux
+    code = os.waitstatus_to_exitcode(status)
+    if code != 0:
+        raise SystemExit(f"bench_tiling: {' '.join(args)} failed with status {code}")
+    return seconds, usage.ru_maxrss / 1024.0, json.loads(output)  # ru_maxrss is in KiB on Linux
 
 
 def main() -> int:
@@ -57,13 +58,16 @@ def main() -> int:
         campus = Path(tmp) / "campus.pcd"
         points_in = merge_pcds(inputs, campus)
         out = Path(tmp) / "tiles"
-        seconds, rss = [], []
+        seconds, rss, phases = [], [], []
         for _ in range(args.repeats):
             shutil.rmtree(out, ignore_errors=True)
-            command = [sys.executable, "-c", GPM, "tile", "--no-progress", "--grid-size", f"{args.grid_size:g}"]
-            wall, peak = run_child([*command, "--memory-mb", f"{args.memory_mb:g}", str(campus), "-o", str(out)])
+            command = [sys.executable, "-c", GPM, "tile", "--json", "--grid-size", f"{args.grid_size:g}"]
+            wall, peak, summary = run_child(
+                [*command, "--memory-mb", f"{args.memory_mb:g}", str(campus), "-o", str(out)]
+            )
             seconds.append(wall)
             rss.append(peak)
+            phases.append(summary)
         index = load_tile_index(out)
         median = statistics.median(seconds)
         print(
@@ -83,7 +87,11 @@ def main() -> int:
                     "bytes_tiles_total": sum(t.bytes for t in index.tiles),
                     "repeats": args.repeats,
                     "seconds_all": [round(s, 3) for s in seconds],
-                    "timing": "median wall time of the gpm process (Python start-up included)",
+                    "seconds_stream_median": round(statistics.median(p["seconds_stream"] for p in phases), 3),
+                    "seconds_write_median": round(statistics.median(p["seconds_write"] for p in phases), 3),
+                    "stream_points_per_s": round(points_in / statistics.median(p["seconds_stream"] for p in phases)),
+                    "timing": "seconds: median wall time of the gpm process (Python start-up included);"
+                    " stream: reading + grouping + spilling; write: creating the tile files and index",
                     "cpu": cpu_model(),
                     "cores": os.cpu_count(),
                     "threads_used": 1,

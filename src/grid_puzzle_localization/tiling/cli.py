@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 from grid_puzzle_localization.errors import UserError
@@ -23,6 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--force", action="store_true", help="replace a non-empty OUT_DIR")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar even on a terminal")
+    parser.add_argument("--json", action="store_true", help="print the tiling summary as one JSON line")
     parser.add_argument("--verify", type=Path, metavar="OUT_DIR", help="re-check a tiled map against MAP.pcd")
 
 
@@ -36,6 +38,18 @@ def run(args: argparse.Namespace) -> int:
     )
     result = tile_map(args.inputs, args.output, config)
     index = result.index
+    if args.json:
+        summary = {
+            "points": index.points,
+            "tiles": len(index.tiles),
+            "nonfinite_dropped": index.nonfinite_dropped,
+            "spills": result.spills,
+            "seconds": result.seconds,
+            "seconds_stream": result.seconds_stream,
+            "seconds_write": result.seconds_write,
+        }
+        print(json.dumps(summary))
+        return 0
     print(
         f"{index.points} points in {len(index.tiles)} tiles of {index.grid_size:g} m -> {args.output}"
         f" ({index.nonfinite_dropped} NaN/inf points dropped, {result.spills} spills, {result.seconds:.2f} s)"

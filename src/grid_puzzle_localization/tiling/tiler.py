@@ -51,7 +51,9 @@ class TileConfig:
 class TileResult:
     index: TileIndex
     spills: int
-    seconds: float
+    seconds: float  # whole run [s]
+    seconds_stream: float  # reading, grouping and spilling [s]
+    seconds_write: float  # writing tile files, index and metadata [s]
 
 
 def check_inputs(paths: Sequence[Path]) -> list[PcdHeader]:
@@ -95,6 +97,7 @@ def tile_map(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, co
                     bar.update(len(chunk))
                 bar.update(chunks.nonfinite_dropped)
                 read.append((path, chunks))
+        streamed = time.perf_counter()
         entries = _write_tiles(buffer, tmp, s, headers[0], show)
         if buffer.spill_dir.exists():
             buffer.spill_dir.rmdir()
@@ -123,7 +126,8 @@ def tile_map(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, co
         write_index(tmp, index)
         write_autoware_metadata(tmp, index)
     index.directory = out_dir
-    return TileResult(index=index, spills=buffer.spills, seconds=time.perf_counter() - start)
+    end = time.perf_counter()
+    return TileResult(index, buffer.spills, end - start, streamed - start, end - streamed)
 
 
 def _write_tiles(buffer: TileBuffer, directory: Path, s: float, header: PcdHeader, show: bool) -> list[TileEntry]:
