@@ -233,3 +233,19 @@ def test_cli_missing_input_and_bad_grid_size(tmp_path):
     done = run_gpm("tile", "--grid-size", "-2", str(src), "-o", str(tmp_path / "t"))
     assert done.returncode == 2 and "grid size must be a positive" in done.stderr
     assert not (tmp_path / "t").exists()
+
+
+def test_verify_reports_points_moved_between_tiles(tmp_path):
+    src = tmp_path / "map.pcd"
+    write_pcd(src, random_cloud(3000, 1.0, seed=8))
+    out = tmp_path / "tiles"
+    tile_map([src], out, TileConfig(grid_size=1.0))
+    index = load_tile_index(out)
+    a, b = (index.path(e) for e in index.tiles[:2])
+    pa, pb = read_pcd(a).points, read_pcd(b).points
+    pa[0], pb[0] = pb[0].copy(), pa[0].copy()  # same records and counts overall, two in the wrong cell
+    write_pcd(a, pa)
+    write_pcd(b, pb)
+    report = verify_tiles(out, [src])
+    assert report.misplaced_points == 2 and report.checksum_in == report.checksum_tiles
+    assert not report.ok and "2 tile points lie outside their tile's cell" in report.problems
