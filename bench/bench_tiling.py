@@ -50,11 +50,12 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--grid-size", type=float, default=2.0)
     parser.add_argument("--memory-mb", type=float, default=200.0)
+    parser.add_argument("--tmp-dir", default=None, help="where the merged map and the tiles go (default: system temp)")
     args = parser.parse_args()
     inputs = sorted(CAMPUS_TILES.glob("*.pcd"))
     if not inputs:
         raise SystemExit(f"bench_tiling: no campus tiles in {CAMPUS_TILES}")
-    with tempfile.TemporaryDirectory(prefix="bench_tiling_") as tmp:
+    with tempfile.TemporaryDirectory(prefix="bench_tiling_", dir=args.tmp_dir) as tmp:
         campus = Path(tmp) / "campus.pcd"
         points_in = merge_pcds(inputs, campus)
         out = Path(tmp) / "tiles"
@@ -96,6 +97,9 @@ def main() -> int:
                     "cores": os.cpu_count(),
                     "threads_used": 1,
                     "load_avg_1min": round(os.getloadavg()[0], 2),
+                    "output_fs": subprocess.run(
+                        ["stat", "-f", "-c", "%T", tmp], capture_output=True, text=True
+                    ).stdout.strip(),
                 }
             )
         )
