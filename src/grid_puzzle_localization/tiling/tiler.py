@@ -21,7 +21,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 from tqdm import tqdm
 
 from grid_puzzle_localization.errors import UserError
@@ -162,7 +161,7 @@ def _write_tiles(buffer: TileBuffer, directory: Path, s: float, header: PcdHeade
 def _write_tile(dir_fd: int, name: str, header: bytes, tile: TileData) -> None:
     fd = os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644, dir_fd=dir_fd)
     try:
-        head = [np.frombuffer(header, dtype=np.uint8)]
+        head = [header]
         if tile.spill is not None:
             write_all(fd, head)
             with open(tile.spill, "rb") as src:
