@@ -31,3 +31,8 @@ demo: build
 
 clean:
 	rm -rf $(ROOT)/.catkin_ws $(ROOT)/test_results
+
+# ---- tiling benchmark (issue 2) ----
+.PHONY: bench-tiling
+bench-tiling: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_tiling.py

@@ -11,7 +11,9 @@ from grid_puzzle_localization.errors import UserError
 
 # name -> (module, one-line help). Modules are imported lazily so `gpm tile` does not pay for
 # matplotlib or rospy.
-COMMANDS: dict[str, tuple[str, str]] = {}
+COMMANDS: dict[str, tuple[str, str]] = {
+    "tile": ("tiling.cli", "cut a global map PCD into grid puzzle tiles (or --verify a tiled map)"),
+}
 
 
 def build_parser() -> argparse.ArgumentParser:
