@@ -1,0 +1,85 @@
+"""Which tiles a tile directory holds: from its index file when present, otherwise by scanning the
+``<cx>_<cy>.pcd`` names. Keys are kept as one sorted (N, 2) int64 array (no Python object per tile), so
+a map of a million tiles costs 16 MB and a window query is two binary searches plus a slice."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.grid import check_grid_size, parse_tile_stem, tile_filename
+from grid_puzzle_localization.window import Window
+
+
+@dataclass(frozen=True)
+class TileDirectory:
+    """The tiles of one directory. ``keys`` are the (i, j) indices sorted by i, then j."""
+
+    path: Path
+    grid_size: float  # s [m]
+    keys: np.ndarray
+    source: str  # "index" or "scan"
+    unparsable: tuple[str, ...] = field(default=())  # *.pcd names that are not tiles of side s
+
+    def tile_path(self, key: tuple[int, int]) -> Path:
+        return self.path / tile_filename(key[0], key[1], self.grid_size)
+
+    def existing_in(self, window: Window) -> np.ndarray:
+        """The (M, 2) keys of existing tiles inside ``window``."""
+        lo = np.searchsorted(self.keys[:, 0], window.i_min, side="left")
+        hi = np.searchsorted(self.keys[:, 0], window.i_max, side="right")
+        band = self.keys[lo:hi]
+        return band[(band[:, 1] >= window.j_min) & (band[:, 1] <= window.j_max)]
+
+    @property
+    def bounds(self) -> tuple[int, int, int, int]:
+        """(i_min, i_max, j_min, j_max) over all tiles."""
+        return (
+            int(self.keys[:, 0].min()),
+            int(self.keys[:, 0].max()),
+            int(self.keys[:, 1].min()),
+            int(self.keys[:, 1].max()),
+        )
+
+
+def sorted_keys(keys: np.ndarray) -> np.ndarray:
+    keys = np.asarray(keys, dtype=np.int64).reshape(-1, 2)
+    return keys[np.lexsort((keys[:, 1], keys[:, 0]))]
+
+
+def scan_tiles(path: Path, s: float) -> tuple[np.ndarray, tuple[str, ...]]:
+    """Keys of the ``*.pcd`` files of ``path`` whose names parse as tiles of side ``s``, and the names
+    that do not."""
+    keys, bad = [], []
+    with os.scandir(path) as entries:
+        for entry in entries:
+            if not entry.name.endswith(".pcd"):
+                continue
+            try:
+                keys.append(parse_tile_stem(entry.name[: -len(".pcd")], s))
+            except ValueError:
+                bad.append(entry.name)
+    return sorted_keys(np.array(keys, dtype=np.int64)), tuple(sorted(bad))
+
+
+def open_tile_directory(path: str | os.PathLike, grid_size: float | None = None) -> TileDirectory:
+    """Opens a tile directory. ``grid_size`` [m] is required without an index and must match the index
+    when both are given. Raises UserError when the directory is missing or holds no tiles."""
+    path = Path(path)
+    if not path.is_dir():
+        raise UserError(f"tile directory {path} does not exist; write one with `gpm tile` or fix the path")
+    if grid_size is None:
+        raise UserError(
+            f"tile directory {path} has no index file, so the grid size is unknown;"
+            " pass it (--grid-size / tiles/grid_size)"
+        )
+    s = check_grid_size(grid_size)
+    keys, bad = scan_tiles(path, s)
+    if len(keys) == 0:
+        hint = f" ({len(bad)} .pcd files with other names, e.g. {bad[0]})" if bad else ""
+        raise UserError(f"tile directory {path} holds no tile files named <cx>_<cy>.pcd for s = {s} m{hint}")
+    return TileDirectory(path, s, keys, "scan", bad)

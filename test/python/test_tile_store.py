@@ -1,0 +1,187 @@
+"""Tile directory and store: the loaded set after random paths against a brute-force selection over the
+directory listing, deltas replayed against the files, the cache, and the error cases."""
+
+import math
+import os
+
+import numpy as np
+import pytest
+
+from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.pcd import read_pcd
+from grid_puzzle_localization.synthetic_tiles import write_tiles
+from grid_puzzle_localization.tile_directory import open_tile_directory
+from grid_puzzle_localization.tile_store import TileStore
+from grid_puzzle_localization.window import PoseSample, WindowConfig, WindowTracker, compute_window
+
+S = 2.0
+
+
+def brute_force_window_files(directory, window, s):
+    """Tile files inside ``window``, by listing the directory and reading the centres off the names."""
+    out = set()
+    for name in os.listdir(directory):
+        stem, ext = os.path.splitext(name)
+        parts = stem.split("_")
+        if ext != ".pcd" or len(parts) != 2:
+            continue
+        try:
+            cx, cy = float(parts[0]), float(parts[1])
+        except ValueError:
+            continue
+        i, j = math.floor(cx / s), math.floor(cy / s)
+        if (i + 0.5) * s != cx or (j + 0.5) * s != cy:
+            continue
+        if window.i_min <= i <= window.i_max and window.j_min <= j <= window.j_max:
+            out.add((i, j))
+    return out
+
+
+@pytest.fixture(scope="module")
+def holey_map(tmp_path_factory):
+    """A 24 x 20 tile map around the origin with 30 % of the tiles missing and some foreign files."""
+    d = tmp_path_factory.mktemp("tiles")
+    rng = np.random.default_rng(1)
+    keys = [(i, j) for i in range(-12, 12) for j in range(-8, 12) if rng.random() > 0.3]
+    write_tiles(d, keys, S, count=20, seed=2)
+    for foreign in ("README.pcd", "2.0_3.0.pcd", "1.0_3.pcd", "notes.txt"):
+        (d / foreign).write_text("not a tile")
+    return d
+
+
+def random_path(rng, steps):
+    x, y = rng.uniform(-10, 10, 2).tolist()
+    heading = rng.uniform(-math.pi, math.pi)
+    for _ in range(steps):
+        if rng.random() < 0.15:
+            heading += rng.uniform(-2.0, 2.0)
+        step = rng.choice([0.0, 0.3, 1.5, 3.0])  # standing, creeping, driving
+        x += step * math.cos(heading)
+        y += step * math.sin(heading)
+        if abs(x) > 40 or abs(y) > 40:  # wander off the map and come back
+            heading += math.pi
+        yield x, y
+
+
+def test_directory_scan_reports_foreign_names(holey_map):
+    d = open_tile_directory(holey_map, S)
+    assert d.source == "scan"
+    assert d.unparsable == ("1.0_3.pcd", "2.0_3.0.pcd", "README.pcd")
+    everything = compute_window(0.0, 0.0, None, S, 100, 0)
+    assert {tuple(k) for k in d.existing_in(everything).tolist()} == brute_force_window_files(holey_map, everything, S)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_loaded_set_equals_window_and_listing_after_random_paths(holey_map, seed):
+    rng = np.random.default_rng(seed)
+    store = TileStore(open_tile_directory(holey_map, S), cache_mb=0.05 if seed % 2 else 8.0)
+    tracker = WindowTracker(WindowConfig(n=2, k=3), S)
+    mirror = {}  # replays the deltas, as a subscriber would
+    try:
+        for x, y in random_path(rng, 150):
+            window = tracker.update(PoseSample(x, y))
+            if window is None:
+                continue
+            delta = store.update(window, tracker.predicted_next())
+            for key in delta.removed:
+                del mirror[key]
+            for key, points in delta.added:
+                assert key not in mirror
+                mirror[key] = points
+            truth = brute_force_window_files(holey_map, window, S)
+            assert {k for k, _ in store.loaded()} == truth
+            assert set(mirror) == truth
+            assert store.stats().cache_bytes <= store.cache_limit
+        for key, points in mirror.items():
+            assert read_pcd(store.directory.tile_path(key)).points.tobytes() == points.tobytes()
+    finally:
+        store.close()
+
+
+def test_straight_drive_is_served_from_the_prefetch_cache(holey_map):
+    store = TileStore(open_tile_directory(holey_map, S), cache_mb=8.0)
+    tracker = WindowTracker(WindowConfig(n=2, k=2), S)
+    misses_after_start = 0
+    try:
+        for step in range(30):
+            window = tracker.update(PoseSample(-20.0 + 1.5 * step, 1.0))
+            delta = store.update(window, tracker.predicted_next())
+            if step >= 2:
+                misses_after_start += delta.misses
+            assert store.wait_prefetch_idle(timeout=30.0)
+        stats = store.stats()
+        assert misses_after_start == 0
+        assert stats.cache_hits > 0 and stats.prefetched > 0
+    finally:
+        store.close()
+
+
+def test_u_turn_is_served_from_the_cache_without_prefetch(holey_map):
+    store = TileStore(open_tile_directory(holey_map, S), cache_mb=8.0, prefetch=False)
+    try:
+        first = store.update(compute_window(1.0, 1.0, None, S, 2, 0))
+        store.update(compute_window(21.0, 1.0, None, S, 2, 0))  # all tiles leave the window
+        back = store.update(compute_window(1.0, 1.0, None, S, 2, 0))
+        assert back.misses == 0 and back.hits == len(first.added) > 0
+    finally:
+        store.close()
+
+
+def test_corrupt_tile_is_skipped_and_reported_once(tmp_path):
+    keys = [(i, j) for i in range(4) for j in range(4)]
+    write_tiles(tmp_path, keys, S, count=10)
+    bad = open_tile_directory(tmp_path, S).tile_path((1, 1))
+    bad.write_bytes(bad.read_bytes()[:-7])  # truncated
+    store = TileStore(open_tile_directory(tmp_path, S), cache_mb=1.0)
+    try:
+        reports = []
+        for x in (1.0, 3.5, 1.0, 6.5, 1.0):
+            delta = store.update(compute_window(x, 1.0, None, S, 1, 0))
+            reports += delta.newly_corrupt
+            assert (1, 1) not in {k for k, _ in store.loaded()}
+        assert [p for p, _ in reports] == [bad]
+        assert "truncated" in reports[0][1]
+        assert store.stats().corrupt == [str(bad)]
+    finally:
+        store.close()
+
+
+def test_tile_with_other_fields_is_reported_not_merged(tmp_path):
+    write_tiles(tmp_path, [(0, 0)], S, count=5)
+    from grid_puzzle_localization.pcd import write_pcd
+
+    odd = np.zeros(3, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
+    odd["x"] = 3.0
+    write_pcd(tmp_path / "3.0_1.0.pcd", odd)
+    store = TileStore(open_tile_directory(tmp_path, S), prefetch=False)
+    try:
+        delta = store.update(compute_window(1.0, 1.0, None, S, 1, 0))
+        assert [k for k, _ in delta.added] == [(0, 0)]
+        assert len(delta.newly_corrupt) == 1 and "differ" in delta.newly_corrupt[0][1]
+        assert len(store.merged()) == 5
+    finally:
+        store.close()
+
+
+def test_directory_errors_name_the_path(tmp_path):
+    with pytest.raises(UserError, match="does not exist"):
+        open_tile_directory(tmp_path / "nope", S)
+    with pytest.raises(UserError, match="holds no tile files"):
+        open_tile_directory(tmp_path, S)
+    (tmp_path / "map.pcd").write_text("x")
+    with pytest.raises(UserError, match=r"map\.pcd"):
+        open_tile_directory(tmp_path, S)
+    with pytest.raises(UserError, match="grid size"):
+        open_tile_directory(tmp_path, None)
+
+
+def test_off_map_window_is_empty_and_recovers(holey_map):
+    store = TileStore(open_tile_directory(holey_map, S), prefetch=False)
+    try:
+        home = compute_window(1.0, 1.0, None, S, 2, 0)
+        n_home = len(store.update(home).added)
+        away = store.update(compute_window(1e6, -1e6, None, S, 2, 0))
+        assert len(away.removed) == n_home and not away.added and store.merged().size == 0
+        assert len(store.update(home).added) == n_home
+    finally:
+        store.close()
