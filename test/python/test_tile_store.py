@@ -2,10 +2,10 @@
 directory listing, deltas replayed against the files, the cache, and the error cases."""
 
 import math
-import os
 
 import numpy as np
 import pytest
+from tile_truth import brute_force_window_files
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.pcd import read_pcd
@@ -15,26 +15,6 @@ from grid_puzzle_localization.tile_store import TileStore
 from grid_puzzle_localization.window import PoseSample, WindowConfig, WindowTracker, compute_window
 
 S = 2.0
-
-
-def brute_force_window_files(directory, window, s):
-    """Tile files inside ``window``, by listing the directory and reading the centres off the names."""
-    out = set()
-    for name in os.listdir(directory):
-        stem, ext = os.path.splitext(name)
-        parts = stem.split("_")
-        if ext != ".pcd" or len(parts) != 2:
-            continue
-        try:
-            cx, cy = float(parts[0]), float(parts[1])
-        except ValueError:
-            continue
-        i, j = math.floor(cx / s), math.floor(cy / s)
-        if (i + 0.5) * s != cx or (j + 0.5) * s != cy:
-            continue
-        if window.i_min <= i <= window.i_max and window.j_min <= j <= window.j_max:
-            out.add((i, j))
-    return out
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +48,9 @@ def test_directory_scan_reports_foreign_names(holey_map):
     assert d.source == "scan"
     assert d.unparsable == ("1.0_3.pcd", "2.0_3.0.pcd", "README.pcd")
     everything = compute_window(0.0, 0.0, None, S, 100, 0)
-    assert {tuple(k) for k in d.existing_in(everything).tolist()} == brute_force_window_files(holey_map, everything, S)
+    assert {tuple(k) for k in d.existing_in(everything).tolist()} == brute_force_window_files(
+        holey_map, everything.bounds, S
+    )
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -88,7 +70,7 @@ def test_loaded_set_equals_window_and_listing_after_random_paths(holey_map, seed
             for key, points in delta.added:
                 assert key not in mirror
                 mirror[key] = points
-            truth = brute_force_window_files(holey_map, window, S)
+            truth = brute_force_window_files(holey_map, window.bounds, S)
             assert {k for k, _ in store.loaded()} == truth
             assert set(mirror) == truth
             assert store.stats().cache_bytes <= store.cache_limit
