@@ -12,6 +12,7 @@ from grid_puzzle_localization.errors import UserError
 # name -> (module, one-line help). Modules are imported lazily so `gpm tile` does not pay for
 # matplotlib or rospy.
 COMMANDS: dict[str, tuple[str, str]] = {
+    "tile": ("tiling.cli", "cut a global map PCD into grid puzzle tiles (or --verify a tiled map)"),
     "window": ("window_cli", "print the grid puzzle window (tiles to load) for a position, as JSON"),
 }
 
