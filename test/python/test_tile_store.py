@@ -167,3 +167,55 @@ def test_off_map_window_is_empty_and_recovers(holey_map):
         assert len(store.update(home).added) == n_home
     finally:
         store.close()
+
+
+@pytest.fixture(scope="module")
+def tiled_by_tiler(tmp_path_factory):
+    """A map cut by the real tiler (index.json present)."""
+    from grid_puzzle_localization.pcd import write_pcd
+    from grid_puzzle_localization.synthetic_tiles import POINT_DTYPE
+    from grid_puzzle_localization.tiling import TileConfig, tile_map
+
+    root = tmp_path_factory.mktemp("tiler")
+    rng = np.random.default_rng(11)
+    pts = np.zeros(4000, dtype=POINT_DTYPE)
+    pts["x"] = rng.uniform(-15.0, 9.0, len(pts))
+    pts["y"] = rng.uniform(-5.0, 13.0, len(pts))
+    write_pcd(root / "map.pcd", pts)
+    tile_map([root / "map.pcd"], root / "tiles", TileConfig(grid_size=0.5, progress=False))
+    return root / "tiles"
+
+
+def test_index_gives_the_same_tiles_as_the_tiler_loader_and_the_listing(tiled_by_tiler):
+    from grid_puzzle_localization.tiling import load_tile_index
+
+    d = open_tile_directory(tiled_by_tiler)
+    assert d.source == "index" and d.grid_size == 0.5
+    reference = load_tile_index(tiled_by_tiler)
+    assert {tuple(k) for k in d.keys.tolist()} == {t.key for t in reference.tiles}
+    everything = compute_window(0.0, 0.0, None, 0.5, 100, 0)
+    assert {tuple(k) for k in d.keys.tolist()} == brute_force_window_files(tiled_by_tiler, everything.bounds, 0.5)
+    assert open_tile_directory(tiled_by_tiler, 0.5).source == "index"
+    with pytest.raises(UserError, match="disagrees"):
+        open_tile_directory(tiled_by_tiler, 2.0)
+
+
+def test_store_serves_tiler_output(tiled_by_tiler):
+    store = TileStore(open_tile_directory(tiled_by_tiler), prefetch=False)
+    try:
+        window = compute_window(-3.0, 4.0, math.radians(300), 0.5, 3, 4)
+        store.update(window)
+        truth = brute_force_window_files(tiled_by_tiler, window.bounds, 0.5)
+        assert {k for k, _ in store.loaded()} == truth and truth
+        merged = store.merged()
+        i = np.floor(merged["x"].astype(np.float64) / 0.5)
+        assert i.min() >= window.i_min and i.max() <= window.i_max
+    finally:
+        store.close()
+
+
+def test_broken_index_is_a_user_error(tmp_path):
+    write_tiles(tmp_path, [(0, 0)], S, count=2)
+    (tmp_path / "index.json").write_text("{not json")
+    with pytest.raises(UserError, match="index"):
+        open_tile_directory(tmp_path)
