@@ -19,7 +19,7 @@ POSE_SOURCES = ("odom", "pose")
 class TilesConfig:
     dir: str = ""  # tile directory written by `gpm tile` (required)
     grid_size: float = 0.0  # [m] tile side s; 0 = take it from the index (required when there is none)
-    cache_mb: float = 64.0  # [MiB] bound of the prefetch cache
+    cache_mb: float = 0.0  # [MiB] bound of the prefetch cache; 0 = auto: the bytes of the loaded window
 
 
 @dataclass(frozen=True)

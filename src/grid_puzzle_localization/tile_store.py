@@ -13,6 +13,7 @@ from __future__ import annotations
 import threading
 import time
 from collections import OrderedDict
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -57,9 +58,12 @@ class StoreStats:
 
 
 class TileStore:
-    def __init__(self, directory: TileDirectory, cache_mb: float = 64.0, prefetch: bool = True) -> None:
+    def __init__(self, directory: TileDirectory, cache_mb: float = 0.0, prefetch: bool = True) -> None:
+        """``cache_mb`` [MiB] bounds the cache; 0 (auto) bounds it by the bytes of the loaded window
+        (at least 1 MiB), enough for the tiles of the next windows and cheap in memory."""
         self.directory = directory
-        self.cache_limit = int(cache_mb * 2**20)
+        self._cache_mb = cache_mb
+        self._loaded_bytes = 0
         self._lock = threading.Lock()
         self._changed = threading.Condition(self._lock)
         self._loaded: dict[Key, np.ndarray] = {}
@@ -79,15 +83,17 @@ class TileStore:
             self._thread.start()
 
     # ------------------------------------------------------------ public API
-    def update(self, window: Window, predicted: Window | None = None) -> StoreDelta:
+    def update(self, window: Window, ahead: Sequence[Window] = ()) -> StoreDelta:
         """Makes the loaded set equal to the existing, readable tiles of ``window``; then asks the
-        prefetcher for the tiles of ``predicted`` that are not loaded yet."""
+        prefetcher for the tiles of the ``ahead`` windows (most likely first) that are not loaded."""
         start = time.perf_counter()
         wanted = {(int(i), int(j)) for i, j in self.directory.existing_in(window)}
         with self._lock:
             removed = sorted(k for k in self._loaded if k not in wanted)
             for key in removed:
-                self._cache_put(key, self._loaded.pop(key))
+                points = self._loaded.pop(key)
+                self._loaded_bytes -= points.nbytes
+                self._cache_put(key, points)
             entering = sorted(k for k in wanted if k not in self._loaded and k not in self._corrupt)
         added: list[tuple[Key, np.ndarray]] = []
         corrupt: list[tuple[Path, str]] = []
@@ -106,33 +112,44 @@ class TileStore:
                     continue
             with self._lock:
                 self._loaded[key] = points
+                self._loaded_bytes += points.nbytes
                 self._cache_drop(key)  # the prefetcher may have read it meanwhile
             added.append((key, points))
         with self._lock:
             self._stats.cache_hits += hits
             self._stats.cache_misses += misses
-        if predicted is not None:
-            self._request_prefetch(predicted, wanted)
+        if ahead:
+            self._request_prefetch(ahead, wanted)
         return StoreDelta(added, removed, corrupt, (time.perf_counter() - start) * 1e3, hits, misses)
+
+    @property
+    def cache_limit(self) -> int:
+        """Current bound of the cache [bytes]."""
+        if self._cache_mb > 0.0:
+            return int(self._cache_mb * 2**20)
+        return max(self._loaded_bytes, 2**20)
 
     def loaded(self) -> list[tuple[Key, np.ndarray]]:
         """A snapshot of the loaded tiles, sorted by key."""
         with self._lock:
             return sorted(self._loaded.items())
 
+    @property
+    def dtype(self) -> np.dtype:
+        """Point dtype of the tiles (x, y, z float32 before any tile was read)."""
+        return self._dtype or np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
+
     def merged(self) -> np.ndarray:
         """All loaded points in one array (key order); empty with the tiles' dtype when none."""
         parts = [points for _, points in self.loaded()]
-        if parts:
-            return np.concatenate(parts)
-        return np.empty(0, dtype=self._dtype or np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4")]))
+        return np.concatenate(parts) if parts else np.empty(0, dtype=self.dtype)
 
     def stats(self) -> StoreStats:
         with self._lock:
             s = self._stats
             s.tiles_loaded = len(self._loaded)
             s.points = sum(len(p) for p in self._loaded.values())
-            s.bytes = sum(p.nbytes for p in self._loaded.values())
+            s.bytes = self._loaded_bytes
             s.cache_tiles = len(self._cache)
             s.cache_bytes = self._cache_bytes
             s.corrupt = [str(self.directory.tile_path(k)) for k in sorted(self._corrupt)]
@@ -179,9 +196,10 @@ class TileStore:
         """Inserts under the lock, evicting least recently used tiles; returns False (and keeps the cache)
         when that would evict a ``protected`` tile or the tile alone exceeds the limit."""
         self._cache_drop(key)
-        if points.nbytes > self.cache_limit:
+        limit = self.cache_limit
+        if points.nbytes > limit:
             return False
-        while self._cache_bytes + points.nbytes > self.cache_limit:
+        while self._cache_bytes + points.nbytes > limit:
             oldest = next(iter(self._cache))
             if protected is not None and oldest in protected:
                 return False
@@ -195,10 +213,10 @@ class TileStore:
         if stale is not None:
             self._cache_bytes -= stale.nbytes
 
-    def _request_prefetch(self, predicted: Window, wanted: set[Key]) -> None:
-        ahead = [(int(i), int(j)) for i, j in self.directory.existing_in(predicted)]
+    def _request_prefetch(self, ahead: Sequence[Window], wanted: set[Key]) -> None:
+        todo = list(dict.fromkeys((int(i), int(j)) for w in ahead for i, j in self.directory.existing_in(w)))
         with self._lock:
-            self._pending = [k for k in ahead if k not in wanted]
+            self._pending = [k for k in todo if k not in wanted]
             self._generation += 1
             self._changed.notify_all()
 

@@ -130,6 +130,11 @@ def sector_of_degrees(deg: float) -> int:
     return bisect.bisect_right(SECTOR_BOUNDS_DEG, d) - 1
 
 
+def sector_mid_degrees(sector: int) -> float:
+    """Middle of a Table I sector [deg]."""
+    return (SECTOR_BOUNDS_DEG[sector] + SECTOR_BOUNDS_DEG[sector + 1]) / 2.0
+
+
 def sector_of(theta: float) -> int:
     """Table I sector of a heading [rad]."""
     return sector_of_degrees(math.degrees(theta))
@@ -205,12 +210,17 @@ class WindowTracker:
             return pose.x, pose.y
         return pose.x + velocity[0] * t, pose.y + velocity[1] * t
 
-    def predicted_next(self) -> Window | None:
-        """The window one update ahead: the last window centre moved along the heading by the last
-        step (at least just over the update distance). None before a heading exists."""
+    def predicted_windows(self) -> list[Window]:
+        """Windows one update ahead, most likely first: the last window centre moved along the heading
+        by the last step (at least just over the update distance), keeping the heading, then turning
+        into each neighbouring Table I sector (so a turn is served from the prefetch cache too). Empty
+        before a heading exists."""
         if self._theta is None or self.window is None:
-            return None
+            return []
         step = max(self.last_step, self.update_distance) * 1.01
         x = self._center_point[0] + step * math.cos(self._theta)
         y = self._center_point[1] + step * math.sin(self._theta)
-        return compute_window(x, y, self._theta, self.s, self.config.n, self.config.k)
+        n, k = self.config.n, self.config.k
+        sector = sector_of(self._theta)
+        headings = [self._theta] + [math.radians(sector_mid_degrees((sector + d) % 8)) for d in (1, -1)]
+        return [compute_window(x, y, theta, self.s, n, k) for theta in headings]

@@ -6,7 +6,7 @@ from sensor_msgs import point_cloud2
 from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header
 
-from grid_puzzle_localization.ros.cloud_msg import array_to_cloud, cloud_to_array
+from grid_puzzle_localization.ros.cloud_msg import array_to_cloud, cloud_from_parts, cloud_to_array
 
 MIXED = np.dtype(
     [
@@ -134,3 +134,17 @@ def test_truncated_data_is_refused():
     msg.data = msg.data[:-1]
     with pytest.raises(ValueError, match="too few"):
         cloud_to_array(msg)
+
+
+def test_cloud_from_parts_equals_the_concatenation():
+    dtype = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("i", "<u2")])
+    parts = [random_points(n, dtype, seed=n) for n in (3, 0, 17, 1)]
+    msg = cloud_from_parts(parts, dtype, frame_id="map")
+    assert msg.width == 21 and msg.header.frame_id == "map"
+    np.testing.assert_array_equal(
+        np.array(list(point_cloud2.read_points(msg))), np.array(rows_of(np.concatenate(parts)))
+    )
+    empty = cloud_from_parts([], dtype)
+    assert empty.width == 0 and empty.data == b"" and [f.name for f in empty.fields] == ["x", "y", "z", "i"]
+    with pytest.raises(ValueError, match="contiguous"):
+        cloud_from_parts([parts[0][::2]], dtype)

@@ -64,7 +64,7 @@ def test_loaded_set_equals_window_and_listing_after_random_paths(holey_map, seed
             window = tracker.update(PoseSample(x, y))
             if window is None:
                 continue
-            delta = store.update(window, tracker.predicted_next())
+            delta = store.update(window, tracker.predicted_windows())
             for key in delta.removed:
                 del mirror[key]
             for key, points in delta.added:
@@ -87,7 +87,7 @@ def test_straight_drive_is_served_from_the_prefetch_cache(holey_map):
     try:
         for step in range(30):
             window = tracker.update(PoseSample(-20.0 + 1.5 * step, 1.0))
-            delta = store.update(window, tracker.predicted_next())
+            delta = store.update(window, tracker.predicted_windows())
             if step >= 2:
                 misses_after_start += delta.misses
             assert store.wait_prefetch_idle(timeout=30.0)
@@ -219,3 +219,37 @@ def test_broken_index_is_a_user_error(tmp_path):
     (tmp_path / "index.json").write_text("{not json")
     with pytest.raises(UserError, match="index"):
         open_tile_directory(tmp_path)
+
+
+def test_turn_into_a_neighbouring_sector_is_served_from_the_prefetch_cache(holey_map):
+    store = TileStore(open_tile_directory(holey_map, S), cache_mb=8.0)
+    tracker = WindowTracker(WindowConfig(n=2, k=3), S)
+    try:
+        for x in (1.2, 2.7, 4.2, 5.7):  # east along y = 0.1
+            store.update(tracker.update(PoseSample(x, 0.1)), tracker.predicted_windows())
+            assert store.wait_prefetch_idle(timeout=30.0)
+        # Turn to 45 deg: (6.76, 1.16) lies in the tile the prediction (7.22, 0.1) lies in.
+        turned = tracker.update(PoseSample(5.7 + 1.5 * math.cos(math.pi / 4), 0.1 + 1.5 * math.sin(math.pi / 4)))
+        assert turned.sector == 1
+        delta = store.update(turned, tracker.predicted_windows())
+        assert delta.added and delta.misses == 0
+    finally:
+        store.close()
+
+
+def test_auto_cache_is_bounded_by_the_loaded_window(tmp_path):
+    write_tiles(tmp_path, [(i, j) for i in range(30) for j in range(6)], S, count=3000)  # 48 kB tiles
+    store = TileStore(open_tile_directory(tmp_path, S))
+    tracker = WindowTracker(WindowConfig(n=2, k=3), S)
+    fullest = 0.0
+    try:
+        for step in range(40):
+            store.update(tracker.update(PoseSample(1.0 + 1.5 * step, 5.0)), tracker.predicted_windows())
+            store.wait_prefetch_idle(timeout=30.0)
+            stats = store.stats()
+            limit = max(stats.bytes, 2**20)
+            assert stats.cache_bytes <= limit
+            fullest = max(fullest, stats.cache_bytes / limit)
+        assert fullest > 0.8  # the drive left more tiles behind than fit: the bound was what held
+    finally:
+        store.close()

@@ -106,7 +106,7 @@ def test_standing_start_is_the_plain_square_and_standing_still_never_updates():
     assert first.sector == NO_SECTOR and first.bounds == (0, 4, 0, 4)
     for _ in range(10):
         assert tracker.update(PoseSample(5.0 + 1e-3, 5.0)) is None
-    assert tracker.predicted_next() is None
+    assert tracker.predicted_windows() == []
 
 
 def test_update_distance_gating_defaults_to_half_a_tile_and_keeps_the_heading():
@@ -146,12 +146,14 @@ def test_lookahead_uses_velocity_or_motion():
     assert tracker.update(PoseSample(5.0, 1.0, t=1.0)).center == (6, 0)
 
 
-def test_predicted_next_window_is_one_step_along_the_heading():
+def test_predicted_windows_are_one_step_ahead_straight_then_the_neighbouring_sectors():
     tracker = WindowTracker(WindowConfig(n=1, k=1), s=2.0)
     tracker.update(PoseSample(0.5, 0.5))
-    tracker.update(PoseSample(0.5, 2.5))  # step 2 m along +y
-    nxt = tracker.predicted_next()
-    assert nxt.center == (0, 2) and nxt.sector == 2
+    tracker.update(PoseSample(0.5, 2.5))  # step 2 m along +y: sector 2
+    straight, left, right = tracker.predicted_windows()
+    assert straight.center == left.center == right.center == (0, 2)
+    assert (straight.sector, left.sector, right.sector) == (2, 3, 1)
+    assert math.degrees(left.theta) == 135.0 and math.degrees(right.theta) == 45.0
 
 
 def test_presets_and_bad_parameters():

@@ -8,6 +8,7 @@ PointField cannot express (64-bit integers, strings, nested records) are refused
 from __future__ import annotations
 
 import sys
+from collections.abc import Sequence
 
 import numpy as np
 from sensor_msgs.msg import PointCloud2, PointField
@@ -56,20 +57,30 @@ def array_to_cloud(points: np.ndarray, frame_id: str = "", stamp=None, header: H
     """An unorganised (height 1) PointCloud2 holding a copy of ``points``' bytes. ``is_dense`` is true
     when every float field is finite."""
     points = np.ascontiguousarray(points)
+    return cloud_from_parts([points], points.dtype, frame_id, stamp, header)
+
+
+def cloud_from_parts(
+    parts: Sequence[np.ndarray], dtype: np.dtype, frame_id: str = "", stamp=None, header: Header | None = None
+) -> PointCloud2:
+    """One unorganised PointCloud2 of several arrays of the same dtype, copied once straight into the
+    message's data (no concatenated intermediate array)."""
+    for part in parts:
+        if part.dtype != dtype or not part.flags.c_contiguous:
+            raise ValueError(f"every part must be a contiguous array of {dtype} (got {part.dtype})")
     msg = PointCloud2()
     msg.header = header if header is not None else Header(frame_id=frame_id)
     if stamp is not None:
         msg.header.stamp = stamp
     msg.height = 1
-    msg.width = len(points)
-    msg.fields = fields_of(points.dtype)
-    msg.is_bigendian = _byte_order(points.dtype)
-    msg.point_step = points.dtype.itemsize
+    msg.width = sum(len(p) for p in parts)
+    msg.fields = fields_of(dtype)
+    msg.is_bigendian = _byte_order(dtype)
+    msg.point_step = dtype.itemsize
     msg.row_step = msg.point_step * msg.width
-    msg.is_dense = all(
-        bool(np.isfinite(points[n]).all()) for n in points.dtype.names if points.dtype.fields[n][0].base.kind == "f"
-    )
-    msg.data = points.tobytes()
+    floats = [n for n in dtype.names if dtype.fields[n][0].base.kind == "f"]
+    msg.is_dense = all(bool(np.isfinite(p[n]).all()) for p in parts for n in floats)
+    msg.data = b"".join(memoryview(p) for p in parts)
     return msg
 
 

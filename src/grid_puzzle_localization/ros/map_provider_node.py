@@ -24,7 +24,7 @@ from std_srvs.srv import Trigger, TriggerResponse
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.msg import ProviderStatus, TileDelta
 from grid_puzzle_localization.provider_config import ProviderConfig, load_config
-from grid_puzzle_localization.ros.cloud_msg import array_to_cloud
+from grid_puzzle_localization.ros.cloud_msg import cloud_from_parts
 from grid_puzzle_localization.ros.provider_msgs import provider_status, stamped, tile_delta
 from grid_puzzle_localization.tile_directory import open_tile_directory
 from grid_puzzle_localization.tile_store import StoreDelta, TileStore
@@ -159,7 +159,7 @@ class MapProviderNode:
     def _serve(self, pose: PoseSample, window: Window) -> None:
         stamp = rospy.Time.from_sec(pose.t) if pose.t > 0.0 else rospy.Time.now()
         with self._lock:
-            delta = self.store.update(window, self.tracker.predicted_next())
+            delta = self.store.update(window, self.tracker.predicted_windows())
             first = self._window is None
             changed = first or delta.added or delta.removed or window.bounds != self._window.bounds
             self._window = window
@@ -172,7 +172,11 @@ class MapProviderNode:
                 )
         self._report(pose, window, delta)
         if self.cloud_pub is not None and (first or delta.added or delta.removed):
-            self.cloud_pub.publish(array_to_cloud(self.store.merged(), header=stamped(self.frame, stamp)))
+            self.cloud_pub.publish(
+                cloud_from_parts(
+                    [p for _, p in self.store.loaded()], self.store.dtype, header=stamped(self.frame, stamp)
+                )
+            )
         self.status_pub.publish(provider_status(stamped(self.frame, stamp), window, self.store.stats(), delta.load_ms))
 
     def _report(self, pose: PoseSample, window: Window, delta: StoreDelta) -> None:
