@@ -31,3 +31,8 @@ demo: build
 
 clean:
 	rm -rf $(ROOT)/.catkin_ws $(ROOT)/test_results
+
+# ---------------------------------------------------------------- tile provider benchmark (issue 5)
+.PHONY: bench-provider
+bench-provider: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_provider.py

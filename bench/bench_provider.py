@@ -17,7 +17,6 @@ import json
 import math
 import os
 import platform
-import resource
 import shutil
 import subprocess
 import sys
@@ -96,8 +95,19 @@ def percentiles(values: list[float]) -> dict:
             "max": round(float(a.max()), 2), "mean": round(float(a.mean()), 2)}  # fmt: skip
 
 
+def proc_status_mb(field: str) -> float:
+    """A memory field of /proc/self/status [MiB]: VmHWM is the peak resident set of this process
+    image (unlike ru_maxrss, not inherited from the parent across fork and exec), VmRSS the current."""
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith(field + ":")) / 1024.0
+
+
 def rss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    return proc_status_mb("VmHWM")
+
+
+def current_rss_mb() -> float:
+    return proc_status_mb("VmRSS")
 
 
 def child(args: argparse.Namespace) -> dict:
@@ -135,6 +145,7 @@ def child(args: argparse.Namespace) -> dict:
         initial.append(((time.perf_counter() - start) * 1e3, len(delta.added)))
         if len(initial) < args.repeats:
             store.close()
+    rss_after_initial = rss_mb()
 
     update_ms, cloud_ms, added, removed, window_bytes = [], [], [], [], []
     skipped = 0
@@ -170,6 +181,7 @@ def child(args: argparse.Namespace) -> dict:
     store.close()
     loaded_peak = max(window_bytes)
     peak = rss_mb()
+    rss_end = current_rss_mb()
     return {
         "route_m": round(float(np.sum(np.hypot(*np.diff(poses[:, 1:], axis=0).T))), 1),
         "drive_s": round(float(poses[-1, 0]), 1),
@@ -198,7 +210,9 @@ def child(args: argparse.Namespace) -> dict:
         "memory": {
             "loaded_window_mb_max": round(loaded_peak / 2**20, 2),
             "rss_after_imports_mb": round(rss_after_imports, 1),
+            "peak_rss_after_initial_window_mb": round(rss_after_initial, 1),
             "peak_rss_mb": round(peak, 1),
+            "rss_at_end_mb": round(rss_end, 1),
             "target_rss_mb": round(2 * loaded_peak / 2**20 + 60.0, 1),
         },
         "targets_met": {

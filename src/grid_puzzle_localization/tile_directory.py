@@ -38,6 +38,10 @@ class TileDirectory:
         band = self.keys[lo:hi]
         return band[(band[:, 1] >= window.j_min) & (band[:, 1] <= window.j_max)]
 
+    def codes_in(self, window: Window) -> np.ndarray:
+        """``existing_in`` as one int64 code per tile (see encode_keys)."""
+        return encode_keys(self.existing_in(window))
+
     @property
     def bounds(self) -> tuple[int, int, int, int]:
         """(i_min, i_max, j_min, j_max) over all tiles."""
@@ -47,6 +51,17 @@ class TileDirectory:
             int(self.keys[:, 1].min()),
             int(self.keys[:, 1].max()),
         )
+
+
+def encode_keys(keys: np.ndarray) -> np.ndarray:
+    """One int64 per (i, j) row: i * 2^32 + (j mod 2^32), exact for |i|, |j| < 2^31 (s = 0.1 m still
+    covers UTM northings). Python ints of these codes are cheap set and dict keys."""
+    return (keys[:, 0] << 32) | (keys[:, 1] & 0xFFFFFFFF)
+
+
+def decode_key(code: int) -> tuple[int, int]:
+    j = code & 0xFFFFFFFF
+    return code >> 32, j - (1 << 32) if j >= 1 << 31 else j
 
 
 def sorted_keys(keys: np.ndarray) -> np.ndarray:

@@ -21,10 +21,10 @@ import numpy as np
 
 from grid_puzzle_localization.errors import PcdError
 from grid_puzzle_localization.pcd import read_pcd
-from grid_puzzle_localization.tile_directory import TileDirectory
+from grid_puzzle_localization.tile_directory import TileDirectory, decode_key
 from grid_puzzle_localization.window import Window
 
-Key = tuple[int, int]
+Key = tuple[int, int]  # (i, j); internally tiles are keyed by their int64 code (tile_directory.encode_keys)
 
 
 @dataclass(frozen=True)
@@ -66,15 +66,15 @@ class TileStore:
         self._loaded_bytes = 0
         self._lock = threading.Lock()
         self._changed = threading.Condition(self._lock)
-        self._loaded: dict[Key, np.ndarray] = {}
-        self._cache: OrderedDict[Key, np.ndarray] = OrderedDict()
+        self._loaded: dict[int, np.ndarray] = {}
+        self._cache: OrderedDict[int, np.ndarray] = OrderedDict()
         self._cache_bytes = 0
-        self._corrupt: dict[Key, str] = {}
+        self._corrupt: dict[int, str] = {}
         self._dtype: np.dtype | None = None
         self._stats = StoreStats()
-        self._pending: list[Key] = []
+        self._pending: list[int] = []
         self._generation = 0
-        self._in_flight: Key | None = None
+        self._in_flight: int | None = None
         self._busy = False  # the prefetcher is working through a request
         self._closed = False
         self._thread = None
@@ -87,40 +87,42 @@ class TileStore:
         """Makes the loaded set equal to the existing, readable tiles of ``window``; then asks the
         prefetcher for the tiles of the ``ahead`` windows (most likely first) that are not loaded."""
         start = time.perf_counter()
-        wanted = {(int(i), int(j)) for i, j in self.directory.existing_in(window)}
+        wanted_codes = self.directory.codes_in(window)
+        wanted = set(wanted_codes.tolist())
         with self._lock:
-            removed = sorted(k for k in self._loaded if k not in wanted)
-            for key in removed:
-                points = self._loaded.pop(key)
+            removed = [c for c in self._loaded if c not in wanted]
+            for code in removed:
+                points = self._loaded.pop(code)
                 self._loaded_bytes -= points.nbytes
-                self._cache_put(key, points)
-            entering = sorted(k for k in wanted if k not in self._loaded and k not in self._corrupt)
+                self._cache_put(code, points)
+            entering = [c for c in wanted_codes.tolist() if c not in self._loaded and c not in self._corrupt]
         added: list[tuple[Key, np.ndarray]] = []
         corrupt: list[tuple[Path, str]] = []
         hits = misses = 0
-        for key in entering:
-            points = self._take_cached(key)
+        for code in entering:
+            points = self._take_cached(code)
             if points is not None:
                 hits += 1
             else:
                 misses += 1
-                points, reason = self._read(key)
+                points, reason = self._read(code)
                 if points is None:
                     with self._lock:
-                        self._corrupt[key] = reason
-                    corrupt.append((self.directory.tile_path(key), reason))
+                        self._corrupt[code] = reason
+                    corrupt.append((self._path(code), reason))
                     continue
             with self._lock:
-                self._loaded[key] = points
+                self._loaded[code] = points
                 self._loaded_bytes += points.nbytes
-                self._cache_drop(key)  # the prefetcher may have read it meanwhile
-            added.append((key, points))
+                self._cache_drop(code)  # the prefetcher may have read it meanwhile
+            added.append((decode_key(code), points))
         with self._lock:
             self._stats.cache_hits += hits
             self._stats.cache_misses += misses
         if ahead:
-            self._request_prefetch(ahead, wanted)
-        return StoreDelta(added, removed, corrupt, (time.perf_counter() - start) * 1e3, hits, misses)
+            self._request_prefetch(ahead, wanted_codes)
+        removed_keys = [decode_key(c) for c in removed]
+        return StoreDelta(added, removed_keys, corrupt, (time.perf_counter() - start) * 1e3, hits, misses)
 
     @property
     def cache_limit(self) -> int:
@@ -132,7 +134,7 @@ class TileStore:
     def loaded(self) -> list[tuple[Key, np.ndarray]]:
         """A snapshot of the loaded tiles, sorted by key."""
         with self._lock:
-            return sorted(self._loaded.items())
+            return sorted((decode_key(c), p) for c, p in self._loaded.items())
 
     @property
     def dtype(self) -> np.dtype:
@@ -152,7 +154,7 @@ class TileStore:
             s.bytes = self._loaded_bytes
             s.cache_tiles = len(self._cache)
             s.cache_bytes = self._cache_bytes
-            s.corrupt = [str(self.directory.tile_path(k)) for k in sorted(self._corrupt)]
+            s.corrupt = sorted(str(self._path(c)) for c in self._corrupt)
             return StoreStats(**vars(s))
 
     def wait_prefetch_idle(self, timeout: float | None = None) -> bool:
@@ -169,9 +171,12 @@ class TileStore:
             self._thread.join()
 
     # ------------------------------------------------------------ internals
-    def _read(self, key: Key) -> tuple[np.ndarray | None, str]:
+    def _path(self, code: int) -> Path:
+        return self.directory.tile_path(decode_key(code))
+
+    def _read(self, code: int) -> tuple[np.ndarray | None, str]:
         """Points of one tile, or (None, reason) when the file cannot be used."""
-        path = self.directory.tile_path(key)
+        path = self._path(code)
         try:
             points = read_pcd(path).points
         except (PcdError, OSError) as err:
@@ -183,7 +188,7 @@ class TileStore:
                 return None, f"{path}: fields {points.dtype} differ from the other tiles' {self._dtype}"
         return points, ""
 
-    def _take_cached(self, key: Key) -> np.ndarray | None:
+    def _take_cached(self, key: int) -> np.ndarray | None:
         """Pops ``key`` from the cache, waiting for the prefetcher if it is reading that very tile."""
         with self._lock:
             while self._in_flight == key:
@@ -192,7 +197,7 @@ class TileStore:
             self._cache_drop(key)
             return points
 
-    def _cache_put(self, key: Key, points: np.ndarray, protected: set[Key] | None = None) -> bool:
+    def _cache_put(self, key: int, points: np.ndarray, protected: set[int] | None = None) -> bool:
         """Inserts under the lock, evicting least recently used tiles; returns False (and keeps the cache)
         when that would evict a ``protected`` tile or the tile alone exceeds the limit."""
         self._cache_drop(key)
@@ -208,15 +213,18 @@ class TileStore:
         self._cache_bytes += points.nbytes
         return True
 
-    def _cache_drop(self, key: Key) -> None:
+    def _cache_drop(self, key: int) -> None:
         stale = self._cache.pop(key, None)
         if stale is not None:
             self._cache_bytes -= stale.nbytes
 
-    def _request_prefetch(self, ahead: Sequence[Window], wanted: set[Key]) -> None:
-        todo = list(dict.fromkeys((int(i), int(j)) for w in ahead for i, j in self.directory.existing_in(w)))
+    def _request_prefetch(self, ahead: Sequence[Window], wanted: np.ndarray) -> None:
+        codes = np.concatenate([self.directory.codes_in(w) for w in ahead])
+        _, first = np.unique(codes, return_index=True)
+        codes = codes[np.sort(first)]  # unique, most likely window first
+        todo = codes[~np.isin(codes, wanted)].tolist()
         with self._lock:
-            self._pending = [k for k in todo if k not in wanted]
+            self._pending = [c for c in todo if c not in self._cache and c not in self._corrupt]
             self._generation += 1
             self._changed.notify_all()
 
@@ -236,8 +244,8 @@ class TileStore:
                     self._busy = False
                     self._changed.notify_all()
 
-    def _prefetch(self, todo: list[Key], generation: int) -> None:
-        round_keys: set[Key] = set()
+    def _prefetch(self, todo: list[int], generation: int) -> None:
+        round_keys: set[int] = set()
         for key in todo:
             with self._lock:
                 if self._closed or generation != self._generation:

@@ -7,6 +7,7 @@ PointField cannot express (64-bit integers, strings, nested records) are refused
 
 from __future__ import annotations
 
+import functools
 import sys
 from collections.abc import Sequence
 
@@ -31,6 +32,12 @@ _LITTLE = sys.byteorder == "little"
 
 def fields_of(dtype: np.dtype) -> list[PointField]:
     """PointFields describing a structured dtype (offsets as in the dtype, padding kept)."""
+    return list(_fields_of(dtype))
+
+
+@functools.lru_cache(maxsize=64)
+def _fields_of(dtype: np.dtype) -> tuple[PointField, ...]:
+    # Cached: a window message holds thousands of tile clouds of one dtype.
     if dtype.names is None:
         raise ValueError(f"a point cloud needs a structured dtype with named fields, not {dtype}")
     fields = []
@@ -41,7 +48,7 @@ def fields_of(dtype: np.dtype) -> list[PointField]:
         if code is None:
             raise ValueError(f"field '{name}' has type {base}, which PointField cannot express")
         fields.append(PointField(name=name, offset=offset, datatype=code, count=int(np.prod(field_dtype.shape))))
-    return fields
+    return tuple(fields)
 
 
 def _byte_order(dtype: np.dtype) -> bool:
@@ -78,9 +85,9 @@ def cloud_from_parts(
     msg.is_bigendian = _byte_order(dtype)
     msg.point_step = dtype.itemsize
     msg.row_step = msg.point_step * msg.width
-    floats = [n for n in dtype.names if dtype.fields[n][0].base.kind == "f"]
-    msg.is_dense = all(bool(np.isfinite(p[n]).all()) for p in parts for n in floats)
     msg.data = b"".join(memoryview(p) for p in parts)
+    points = np.frombuffer(msg.data, dtype=dtype)
+    msg.is_dense = all(bool(np.isfinite(points[n]).all()) for n in dtype.names if dtype.fields[n][0].base.kind == "f")
     return msg
 
 
