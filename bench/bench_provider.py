@@ -111,7 +111,10 @@ def current_rss_mb() -> float:
 
 
 def child(args: argparse.Namespace) -> dict:
-    """The measured drive (runs in its own process)."""
+    """The measured drive (runs in its own process, set up as the node sets itself up)."""
+    from grid_puzzle_localization.malloc_tuning import pin_mmap_threshold
+
+    pin_mmap_threshold()
     from genpy import Time
     from std_msgs.msg import Header
 

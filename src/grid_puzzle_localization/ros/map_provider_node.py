@@ -22,6 +22,7 @@ from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger, TriggerResponse
 
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.malloc_tuning import pin_mmap_threshold
 from grid_puzzle_localization.msg import ProviderStatus, TileDelta
 from grid_puzzle_localization.provider_config import ProviderConfig, load_config
 from grid_puzzle_localization.ros.cloud_msg import cloud_from_parts
@@ -216,6 +217,7 @@ class MapProviderNode:
 
 
 def main() -> None:
+    pin_mmap_threshold()
     rospy.init_node("grid_puzzle_map_provider")
     try:
         config = load_config(lambda name, default: rospy.get_param("~" + name, default))
