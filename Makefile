@@ -36,3 +36,7 @@ clean:
 .PHONY: bench-tiling
 bench-tiling: build
 	@$(SETUP) python3 $(ROOT)/bench/bench_tiling.py
+# ---------------------------------------------------------------- tile provider benchmark (issue 5)
+.PHONY: bench-provider
+bench-provider: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_provider.py

@@ -13,6 +13,7 @@ from grid_puzzle_localization.errors import UserError
 # matplotlib or rospy.
 COMMANDS: dict[str, tuple[str, str]] = {
     "tile": ("tiling.cli", "cut a global map PCD into grid puzzle tiles (or --verify a tiled map)"),
+    "window": ("window_cli", "print the grid puzzle window (tiles to load) for a position, as JSON"),
 }
 
 
