@@ -40,3 +40,16 @@ bench-tiling: build
 .PHONY: bench-provider
 bench-provider: build
 	@$(SETUP) python3 $(ROOT)/bench/bench_provider.py
+# ---------------------------------------------------------------- NDT scan matcher (issue 3)
+.PHONY: bench-ndt tsan
+
+# Builds bench/bench_ndt.cpp in the catkin workspace and prints one JSON line per configuration.
+bench-ndt: build
+	$(SETUP) cd $(ROOT)/.catkin_ws && catkin_make -j2 bench_ndt >/dev/null
+	$(SETUP) $(ROOT)/.catkin_ws/devel/lib/grid_puzzle_localization/bench_ndt
+
+# ThreadSanitizer run of the snapshot/background-update test in its own plain CMake build dir.
+tsan: setup
+	cmake -S $(ROOT)/test/tsan -B $(ROOT)/.catkin_ws/build_tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+	cmake --build $(ROOT)/.catkin_ws/build_tsan -j2
+	TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(ROOT)/.catkin_ws/build_tsan/test_ndt_concurrency_tsan
