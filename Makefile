@@ -31,3 +31,16 @@ demo: build
 
 clean:
 	rm -rf $(ROOT)/.catkin_ws $(ROOT)/test_results
+
+# ---------------------------------------------------------------- NDT localizer (issue 4)
+.PHONY: bench-localizer tsan-localizer
+bench-localizer: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_localizer.py
+
+# ThreadSanitizer build of the ROS-free localizer core (update worker, NDT target, localizer) and its
+# gtests, in a separate build tree; roscpp itself is not instrumented.
+TSAN_BUILD := $(ROOT)/.catkin_ws/tsan
+tsan-localizer: setup
+	cmake -S $(ROOT)/test/tsan -B $(TSAN_BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+	cmake --build $(TSAN_BUILD) -j2
+	cd $(ROOT) && TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(TSAN_BUILD)/tsan_localizer_tests
