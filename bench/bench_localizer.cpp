@@ -130,9 +130,12 @@ int main(int argc, char** argv) {
   int threads = 0;
   for (int i = 3; i + 1 < argc; i += 2) {
     const std::string opt = argv[i];
-    if (opt == "--tile-size") tile_size = std::stod(argv[i + 1]);
-    else if (opt == "--window") half_window = std::stoi(argv[i + 1]);
-    else if (opt == "--threads") threads = std::stoi(argv[i + 1]);
+    if (opt == "--tile-size")
+      tile_size = std::stod(argv[i + 1]);
+    else if (opt == "--window")
+      half_window = std::stoi(argv[i + 1]);
+    else if (opt == "--threads")
+      threads = std::stoi(argv[i + 1]);
     else {
       std::fprintf(stderr, "bench_localizer: unknown option %s\n", opt.c_str());
       return 2;
@@ -207,7 +210,8 @@ int main(int argc, char** argv) {
   double mean_error = 0.0;
   for (double e : errors) mean_error += e / static_cast<double>(errors.size());
   std::printf(
-      "{\"mode\": \"%s\", \"scans\": %zu, \"latency_ms\": {\"p50\": %.2f, \"p95\": %.2f, \"p99\": %.2f, \"max\": %.2f}, "
+      "{\"mode\": \"%s\", \"scans\": %zu, \"latency_ms\": {\"p50\": %.2f, \"p95\": %.2f, \"p99\": %.2f, \"max\": "
+      "%.2f}, "
       "\"worst_latency_during_update_ms\": %.2f, \"scans_during_update\": %zu, \"target_updates\": %zu, "
       "\"target_update_ms\": {\"median\": %.1f, \"max\": %.1f}, \"rejected_matches\": %zu, "
       "\"translation_error_m\": {\"mean\": %.4f, \"max\": %.4f}, \"map_points\": %zu, \"tile_size_m\": %.1f, "
@@ -215,7 +219,7 @@ int main(int argc, char** argv) {
       mode.c_str(), latency.size(), percentile(latency, 0.5), percentile(latency, 0.95), percentile(latency, 0.99),
       percentile(latency, 1.0), percentile(latency_pending, 1.0), latency_pending.size(), updates,
       percentile(update_ms, 0.5), percentile(update_ms, 1.0), rejected, mean_error, percentile(errors, 1.0),
-      input.map.size(), tile_size, (2 * half_window + 1) * (2 * half_window + 1), threads,
-      config.map_update_threads, static_cast<double>(usage.ru_maxrss) / 1024.0);
+      input.map.size(), tile_size, (2 * half_window + 1) * (2 * half_window + 1), threads, config.map_update_threads,
+      static_cast<double>(usage.ru_maxrss) / 1024.0);
   return 0;
 }

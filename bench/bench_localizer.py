@@ -50,11 +50,8 @@ def main() -> int:
     parser.add_argument("--tile-size", type=float, default=10.0, help="tile side [m] (default 10)")
     parser.add_argument("--window", type=int, default=3, help="tiles on each side of the vehicle (default 3)")
     parser.add_argument("--threads", type=int, default=0, help="NDT OpenMP threads, 0 = all cores (default)")
-    parser.add_argument(
-        "--exe",
-        type=Path,
-        default=Path(os.environ.get("GPL_WS", ROOT / ".catkin_ws")) / "devel/lib/grid_puzzle_localization/bench_localizer",
-    )
+    workspace = Path(os.environ.get("GPL_WS", ROOT / ".catkin_ws"))
+    parser.add_argument("--exe", type=Path, default=workspace / "devel/lib/grid_puzzle_localization/bench_localizer")
     args = parser.parse_args()
     hardware = {"cpu_model": cpu_model(), "cores": os.cpu_count(), "threads_used": args.threads or os.cpu_count()}
     with tempfile.TemporaryDirectory() as tmp:

@@ -30,10 +30,10 @@ struct LocalizerConfig {
   double min_transformation_probability = 0.0;
   /// ... and, when true, NDT converged (a match that hit max_iterations is rejected).
   bool require_converged = false;
-  bool use_gyro = true;            ///< use gyro samples for the rotation prediction when they cover the interval
-  double gyro_max_gap = 0.05;      ///< [s] samples may end this far short of a scan and still cover it
-  double time_jump_back = 0.5;     ///< [s] a scan this much older than the last one resets the localizer
-  bool output_aligned = false;     ///< fill LocalizerOutput::aligned (costs a copy per scan)
+  bool use_gyro = true;         ///< use gyro samples for the rotation prediction when they cover the interval
+  double gyro_max_gap = 0.05;   ///< [s] samples may end this far short of a scan and still cover it
+  double time_jump_back = 0.5;  ///< [s] a scan this much older than the last one resets the localizer
+  bool output_aligned = false;  ///< fill LocalizerOutput::aligned (costs a copy per scan)
 
   /// Empty when usable, else every bad value with its allowed range (includes the nested configs).
   std::string validate() const;
@@ -44,12 +44,12 @@ const char* toString(LocalizerState state);
 
 struct LocalizerOutput {
   LocalizerState state = LocalizerState::kWaitingForMap;
-  bool reset = false;        ///< this scan was older than the last one by > time_jump_back: state was reset
-  bool map_swapped = false;  ///< a new target snapshot was swapped in before this scan
+  bool reset = false;               ///< this scan was older than the last one by > time_jump_back: state was reset
+  bool map_swapped = false;         ///< a new target snapshot was swapped in before this scan
   bool map_update_pending = false;  ///< a target update was queued or in progress when the scan started
   /// Valid when state == kTracking: map_T_base at the scan stamp, always finite.
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-  Twist twist = Twist::Zero();           ///< body twist (base frame) [m/s, rad/s]
+  Twist twist = Twist::Zero();             ///< body twist (base frame) [m/s, rad/s]
   Matrix6d covariance = Matrix6d::Zero();  ///< of (x y z roll pitch yaw) [m^2, rad^2]
   /// Of the twist: 2 * covariance / dt^2 for two independent poses dt apart; the max-std diagonal when the
   /// twist is not measured (first scan after an initial pose, or a prediction).
@@ -57,8 +57,8 @@ struct LocalizerOutput {
   bool match_accepted = false;  ///< false: pose is the prediction
   NdtResult ndt;                ///< the match (status INVALID_INPUT when no match was tried)
   PreprocessReport preprocess;
-  double align_ms = 0.0;      ///< NDT only
-  double scan_ms = 0.0;       ///< whole processScan, including preprocessing and the swap
+  double align_ms = 0.0;  ///< NDT only
+  double scan_ms = 0.0;   ///< whole processScan, including preprocessing and the swap
   std::size_t target_voxels = 0;
   std::size_t target_points = 0;
   PointCloud aligned;  ///< map frame, when config.output_aligned and tracking

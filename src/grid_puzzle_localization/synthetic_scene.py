@@ -48,7 +48,7 @@ class Drive:
         object.__setattr__(self, "stamps", np.arange(n) / self.rate)
 
     def pose(self, t: float) -> np.ndarray:
-        """4x4 map_T_base at time ``t`` [s] from the start."""
+        """4x4 map_to_base at time ``t`` [s] from the start."""
         x = self.x0 + self.speed * t
         y = self.weave_amplitude * np.sin(self.weave_omega * t)
         dy = self.weave_amplitude * self.weave_omega * np.cos(self.weave_omega * t)
@@ -142,14 +142,14 @@ def raycast(scene: Scene, origin: np.ndarray, dirs: np.ndarray, max_range: float
 
 
 def scan(
-    scene: Scene, map_T_base: np.ndarray, rng: np.random.Generator, noise: float = 0.01, max_range: float = 100.0
+    scene: Scene, map_to_base: np.ndarray, rng: np.random.Generator, noise: float = 0.01, max_range: float = 100.0
 ) -> np.ndarray:
-    """One HDL-32E-like sweep from ``map_T_base`` (taken at one instant): points ``(K, 3)`` float32 in the
+    """One HDL-32E-like sweep from ``map_to_base`` (taken at one instant): points ``(K, 3)`` float32 in the
     lidar frame, misses dropped, with Gaussian range noise ``noise`` [m]."""
-    map_T_lidar = map_T_base @ lidar_mount()
+    map_to_lidar = map_to_base @ lidar_mount()
     dirs_lidar = hdl32_directions()
-    dirs_map = dirs_lidar @ map_T_lidar[:3, :3].T
-    ranges = raycast(scene, map_T_lidar[:3, 3], dirs_map, max_range)
+    dirs_map = dirs_lidar @ map_to_lidar[:3, :3].T
+    ranges = raycast(scene, map_to_lidar[:3, 3], dirs_map, max_range)
     keep = np.isfinite(ranges)
     r = ranges[keep] + rng.normal(0.0, noise, size=int(keep.sum()))
     return (dirs_lidar[keep] * r[:, None]).astype(np.float32)

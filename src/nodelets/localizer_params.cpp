@@ -64,7 +64,8 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
   load("ndt/line_search", c.ndt.line_search);
   std::string search;
   if (pnh.getParam("ndt/search_method", search) && !parseSearchMethod(search, &c.ndt.search))
-    throw std::invalid_argument("~ndt/search_method '" + search + "' is unknown; use DIRECT1, DIRECT7, DIRECT27 or RADIUS");
+    throw std::invalid_argument("~ndt/search_method '" + search +
+                                "' is unknown; use DIRECT1, DIRECT7, DIRECT27 or RADIUS");
   load("map_update_threads", c.map_update_threads);
   load("match/min_nvtl", c.min_nvtl);
   load("match/min_transformation_probability", c.min_transformation_probability);
@@ -100,10 +101,10 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
       throw std::invalid_argument("~initial_pose must be 6 finite numbers [x y z roll pitch yaw] (m, rad) or []");
     Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
     t.translation() << pose[0], pose[1], pose[2];
-    t.linear() = (Eigen::AngleAxisd(pose[5], Eigen::Vector3d::UnitZ()) *
-                  Eigen::AngleAxisd(pose[4], Eigen::Vector3d::UnitY()) *
-                  Eigen::AngleAxisd(pose[3], Eigen::Vector3d::UnitX()))
-                     .toRotationMatrix();
+    t.linear() =
+        (Eigen::AngleAxisd(pose[5], Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(pose[4], Eigen::Vector3d::UnitY()) *
+         Eigen::AngleAxisd(pose[3], Eigen::Vector3d::UnitX()))
+            .toRotationMatrix();
     p.initial_pose = t;
   }
   return p;

@@ -22,7 +22,7 @@ struct LocalizerRosParams {
   bool publish_tf = true;
   bool publish_aligned_points = false;
   std::string resend_service = "tile_provider/resend";  ///< tiles mode: std_srvs/Trigger on a revision gap
-  std::optional<Eigen::Isometry3d> initial_pose;       ///< from ~initial_pose [x y z roll pitch yaw]
+  std::optional<Eigen::Isometry3d> initial_pose;        ///< from ~initial_pose [x y z roll pitch yaw]
 };
 
 /// Reads every parameter from `pnh`. Bad values of numeric parameters fall back to the default with a

@@ -9,9 +9,10 @@ int main(int argc, char** argv) {
   nodelet::M_string remappings(ros::names::getRemappings());
   nodelet::V_string my_argv(argv + 1, argv + argc);
   if (!loader.load(ros::this_node::getName(), "grid_puzzle_localization/NdtLocalizerNodelet", remappings, my_argv)) {
-    ROS_FATAL("%s: could not load grid_puzzle_localization/NdtLocalizerNodelet; is AMENT_PREFIX_PATH set "
-              "(source devel/setup.bash)?",
-              ros::this_node::getName().c_str());
+    ROS_FATAL(
+        "%s: could not load grid_puzzle_localization/NdtLocalizerNodelet; is AMENT_PREFIX_PATH set "
+        "(source devel/setup.bash)?",
+        ros::this_node::getName().c_str());
     return 1;
   }
   ros::spin();

@@ -1,5 +1,6 @@
 // NDT localizer nodelet: PointCloud2 -> core Localizer -> Odometry, TF and status. All state and maths
 // live in the core (localizer.hpp); this file converts messages, looks up frames and publishes.
+#include <geometry_msgs/PoseWithCovarianceStamped.h>
 #include <nav_msgs/Odometry.h>
 #include <nodelet/nodelet.h>
 #include <ros/ros.h>
@@ -11,7 +12,6 @@
 #include <tf2_ros/transform_broadcaster.h>
 #include <tf2_ros/transform_listener.h>
 
-#include <geometry_msgs/PoseWithCovarianceStamped.h>
 #include <map>
 #include <memory>
 #include <optional>
@@ -111,8 +111,8 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
 
   bool checkMapFrame(const std::string& frame, const char* topic) {
     if (frame.empty() || frame == params_.map_frame) return true;
-    NODELET_ERROR_THROTTLE(5.0, "%s is in frame '%s' but ~map_frame is '%s'; publish the map in the map frame",
-                           topic, frame.c_str(), params_.map_frame.c_str());
+    NODELET_ERROR_THROTTLE(5.0, "%s is in frame '%s' but ~map_frame is '%s'; publish the map in the map frame", topic,
+                           frame.c_str(), params_.map_frame.c_str());
     return false;
   }
 

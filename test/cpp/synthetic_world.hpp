@@ -39,7 +39,8 @@ inline PointCloud makeWorld(float step = 0.2f, unsigned seed = 3) {
   for (int p = 0; p < 10; ++p) {
     const Eigen::Vector3f c(ux(rng), uy(rng), 0);
     for (float z = 0; z < 5; z += step)
-      for (int a = 0; a < 12; ++a) w.push_back(c + Eigen::Vector3f(0.2f * std::cos(a * 0.5236f), 0.2f * std::sin(a * 0.5236f), z));
+      for (int a = 0; a < 12; ++a)
+        w.push_back(c + Eigen::Vector3f(0.2f * std::cos(a * 0.5236f), 0.2f * std::sin(a * 0.5236f), z));
   }
   return w;
 }

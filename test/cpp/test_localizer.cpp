@@ -133,7 +133,8 @@ TEST(Localizer, TilesChangingDuringTheDriveMatchTheFullMap) {
     const int cj = static_cast<int>(std::floor(pose.translation().y() / 10.0));
     for (int i = ci - 2; i <= ci + 2; ++i)
       for (int j = cj - 2; j <= cj + 2; ++j)
-        if (tiles.count(std::to_string(i) + "_" + std::to_string(j))) w.insert(std::to_string(i) + "_" + std::to_string(j));
+        if (tiles.count(std::to_string(i) + "_" + std::to_string(j)))
+          w.insert(std::to_string(i) + "_" + std::to_string(j));
     return w;
   };
   full.setInitialPose(truthAt(0.0));

@@ -79,7 +79,7 @@ TEST(MapUpdateWorker, TileSequenceEqualsASynchronousBuildOfTheRemainingTiles) {
   worker.waitIdle();
   const auto incremental = worker.takeReady();
   ASSERT_NE(incremental, nullptr);
-  EXPECT_EQ(worker.stats().tiles, 11u);
+  EXPECT_EQ(worker.stats().tiles, 12u);
 
   gpl::NdtTarget reference{gpl::VoxelMapParams()};
   std::vector<std::string> remaining;

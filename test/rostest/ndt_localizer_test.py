@@ -16,6 +16,7 @@ import numpy as np
 import rospy
 import rostest
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+from grid_puzzle_localization.msg import NdtStatus, TileDelta
 from nav_msgs.msg import Odometry
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Header
@@ -23,7 +24,6 @@ from std_srvs.srv import Trigger, TriggerResponse
 
 from grid_puzzle_localization import grid
 from grid_puzzle_localization import synthetic_scene as ss
-from grid_puzzle_localization.msg import NdtStatus, TileDelta
 from grid_puzzle_localization.ros.synthetic_bag import write_drive_bag, xyz_cloud
 
 START = 1000.0  # bag time of the first scan [s]
