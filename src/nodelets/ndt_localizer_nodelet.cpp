@@ -248,7 +248,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
   std::map<std::string, Eigen::Isometry3d> static_cache_;  // scan thread only
   TileDeltaSequence tile_sequence_;                        // tile_delta callback only (never concurrent)
-  std::optional<LocalizerState> last_state_;  // for logging each state change once
+  std::optional<LocalizerState> last_state_;               // for logging each state change once
   bool odom_published_by_others_ = false;
   ros::Publisher odom_pub_, status_pub_, aligned_pub_;
   ros::Subscriber points_sub_, initial_pose_sub_, imu_sub_, map_sub_;
