@@ -133,8 +133,10 @@ class NdtLocalizerTest(unittest.TestCase):
         )
         # Every localizer is loaded and subscribed before the bag starts.
         deadline = time.monotonic() + 60.0
+
         def connected() -> bool:  # cloud and offset take map_cloud, tiles takes tile_delta
-            return map_pub.get_num_connections() >= 2 and all(p.get_num_connections() for p in (pose_pub, cls.tiles.pub))
+            others = (pose_pub, cls.tiles.pub)
+            return map_pub.get_num_connections() >= 2 and all(p.get_num_connections() for p in others)
 
         while time.monotonic() < deadline and not connected():
             time.sleep(0.2)
