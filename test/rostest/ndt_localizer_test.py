@@ -145,7 +145,7 @@ class NdtLocalizerTest(unittest.TestCase):
         first = cls.drive.pose(0.0)
         cls.tiles.follow(first[0, 3], first[1, 3])
         time.sleep(3.0)  # let the map and the first window be built in the background
-        subprocess.run(["rosbag", "play", "--clock", "-q", "-r", "0.25", str(bag)], check=True, timeout=300)
+        subprocess.run(["rosbag", "play", "--clock", "-q", "-d", "2", "-r", "0.25", str(bag)], check=True, timeout=300)
         time.sleep(2.0)
         truth_sub.unregister()
 
