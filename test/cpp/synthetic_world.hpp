@@ -17,7 +17,8 @@ inline void addPlane(PointCloud& out, const Eigen::Vector3f& origin, const Eigen
     for (int j = 0; j <= nv; ++j) out.push_back(origin + u * (float(i) / nu) + v * (float(j) / nv));
 }
 
-/// A 60 m x 40 m yard around the origin: ground, four walls, boxes and poles (map frame, metres).
+/// A 60 m x 40 m yard around the origin: ground, four walls, boxes and poles (map frame, metres), with
+/// 1 cm Gaussian noise like a real survey (exactly planar voxels are a degenerate case of their own).
 inline PointCloud makeWorld(float step = 0.2f, unsigned seed = 3) {
   PointCloud w;
   addPlane(w, {-30, -20, 0}, {60, 0, 0}, {0, 40, 0}, step);
@@ -42,6 +43,8 @@ inline PointCloud makeWorld(float step = 0.2f, unsigned seed = 3) {
       for (int a = 0; a < 12; ++a)
         w.push_back(c + Eigen::Vector3f(0.2f * std::cos(a * 0.5236f), 0.2f * std::sin(a * 0.5236f), z));
   }
+  std::normal_distribution<float> noise(0.0f, 0.01f);
+  for (Point& p : w) p += Point(noise(rng), noise(rng), noise(rng));
   return w;
 }
 
