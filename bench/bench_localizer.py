@@ -49,17 +49,19 @@ def main() -> int:
     parser.add_argument("--duration", type=float, default=15.0, help="drive length [s] at 10 Hz (default 15)")
     parser.add_argument("--tile-size", type=float, default=10.0, help="tile side [m] (default 10)")
     parser.add_argument("--window", type=int, default=3, help="tiles on each side of the vehicle (default 3)")
-    parser.add_argument("--threads", type=int, default=0, help="NDT OpenMP threads, 0 = all cores (default)")
+    parser.add_argument("--threads", type=int, help="NDT OpenMP threads, 0 = all cores (default: the localizer's)")
     workspace = Path(os.environ.get("GPL_WS", ROOT / ".catkin_ws"))
     parser.add_argument("--exe", type=Path, default=workspace / "devel/lib/grid_puzzle_localization/bench_localizer")
     args = parser.parse_args()
-    hardware = {"cpu_model": cpu_model(), "cores": os.cpu_count(), "threads_used": args.threads or os.cpu_count()}
+    # Other processes compete for the cores: the load average says how much (latency tails depend on it).
+    hardware = {"cpu_model": cpu_model(), "cores": os.cpu_count(), "load_average_1min": os.getloadavg()[0]}
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp) / "drive.bin"
         write_input(data, ss.Drive(duration=args.duration), seed=1)
         for mode in ("cloud", "tiles"):
             cmd = [str(args.exe), str(data), mode, "--tile-size", str(args.tile_size), "--window", str(args.window)]
-            cmd += ["--threads", str(args.threads)]
+            if args.threads is not None:
+                cmd += ["--threads", str(args.threads)]
             out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
             print(json.dumps({**json.loads(out), **hardware}), flush=True)
     return 0

@@ -20,7 +20,15 @@ namespace grid_puzzle_localization {
 
 struct LocalizerConfig {
   PreprocessConfig preprocess;  ///< applied in the sensor frame (ranges are from the sensor)
-  NdtConfig ndt;                ///< matching; its resolution is also the target's
+  /// Matching; its resolution is also the target's. One OpenMP thread by default, unlike NdtConfig's "all
+  /// cores": a 10 Hz scan takes ~10 ms on one core, and a team of two that shares its cores with the
+  /// driver and the map worker waits for its slowest thread (measured 4x the median latency on a loaded
+  /// 2-core machine, see README "Benchmark").
+  NdtConfig ndt = [] {
+    NdtConfig c;
+    c.threads = 1;
+    return c;
+  }();
   CovarianceConfig covariance;
   int map_update_threads = 1;  ///< OpenMP threads of background target updates (0 = all cores)
   /// A match is accepted only when NVTL >= min_nvtl (dimensionless, the mean best-voxel likelihood;
