@@ -32,17 +32,28 @@ demo: build
 clean:
 	rm -rf $(ROOT)/.catkin_ws $(ROOT)/test_results
 
+# ---------------------------------------------------------------- NDT scan matcher (issue 3)
+.PHONY: bench-ndt tsan
+
+# Builds bench/bench_ndt.cpp in the catkin workspace and prints one JSON line per configuration.
+bench-ndt: build
+	$(SETUP) cd $(ROOT)/.catkin_ws && catkin_make -j2 bench_ndt >/dev/null
+	$(SETUP) $(ROOT)/.catkin_ws/devel/lib/grid_puzzle_localization/bench_ndt
+
+# ThreadSanitizer run of the snapshot/background-update test in its own plain CMake build dir.
+tsan: setup
+	cmake -S $(ROOT)/test/tsan -B $(ROOT)/.catkin_ws/build_tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+	cmake --build $(ROOT)/.catkin_ws/build_tsan -j2
+	TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(ROOT)/.catkin_ws/build_tsan/test_ndt_concurrency_tsan
+
 # ---------------------------------------------------------------- NDT localizer (issue 4)
 .PHONY: bench-localizer tsan-localizer
 bench-localizer: build
 	@$(SETUP) python3 $(ROOT)/bench/bench_localizer.py
 
 # ThreadSanitizer build of the ROS-free localizer core (update worker, NDT target, localizer) and its
-# gtests, in a separate build tree; roscpp itself is not instrumented. OMP_NUM_THREADS=1: Debian's libgomp
-# is not instrumented, so TSan would report its barrier-synchronised team as races; the threads under test
-# are the map worker and the scan thread, which this leaves intact.
-TSAN_BUILD := $(ROOT)/.catkin_ws/tsan
+# gtests in a separate build tree (see test/tsan_localizer); roscpp itself is not instrumented.
 tsan-localizer: setup
-	cmake -S $(ROOT)/test/tsan -B $(TSAN_BUILD) -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
-	cmake --build $(TSAN_BUILD) -j2
-	cd $(ROOT) && OMP_NUM_THREADS=1 TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(TSAN_BUILD)/tsan_localizer_tests
+	cmake -S $(ROOT)/test/tsan_localizer -B $(ROOT)/.catkin_ws/build_tsan_localizer -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+	cmake --build $(ROOT)/.catkin_ws/build_tsan_localizer -j2
+	cd $(ROOT) && TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(ROOT)/.catkin_ws/build_tsan_localizer/tsan_localizer_tests

@@ -29,12 +29,15 @@ struct NdtConfig : VoxelMapParams {
   double step_size = 0.1;                ///< maximum Newton step length (norm of the 6-vector, m and rad), > 0
   double transformation_epsilon = 0.01;  ///< converged when the step length falls below this, >= 0
   int max_iterations = 30;               ///< Newton iterations, >= 1
-  double outlier_ratio = 0.55;           ///< weight of the uniform outlier term of the mixture, [0, 1)
+  double outlier_ratio = 0.55;           ///< weight of the uniform outlier term of the mixture, (0, 1)
   bool line_search = true;               ///< More-Thuente line search; false = fixed step min(|newton|, step_size)
 
   /// Empty when usable, else a message naming each bad value and its allowed range (includes the map params).
   std::string validate() const;
 };
+
+using Vector6d = Eigen::Matrix<double, 6, 1>;
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
 enum class NdtStatus {
   OK,                 ///< converged (step below transformation_epsilon)
@@ -59,11 +62,22 @@ struct NdtResult {
   /// Hessian of the cost w.r.t. (x, y, z, roll, pitch, yaw) at the final pose, with the pose parametrised as
   /// T = Translation(x, y, z) * Rx(roll) * Ry(pitch) * Rz(yaw). Positive definite at a well-constrained minimum;
   /// its inverse is a covariance estimate (up to scale) in [m, rad].
-  Eigen::Matrix<double, 6, 6> hessian = Eigen::Matrix<double, 6, 6>::Zero();
+  Matrix6d hessian = Matrix6d::Zero();
   double inlier_fraction = 0.0;   ///< source points whose best Gaussian is within chi2(3 dof, 99%) Mahalanobis
   std::size_t source_points = 0;  ///< finite source points used
   NdtStatus status = NdtStatus::INVALID_INPUT;
   std::string message;  ///< empty when OK, else what went wrong and what to do
+};
+
+/// Pose parameters (x, y, z [m], roll, pitch, yaw [rad]) <-> T = Translation * Rx(roll) * Ry(pitch) * Rz(yaw).
+Eigen::Matrix4d poseToMatrix(const Vector6d& pose);
+Vector6d matrixToPose(const Eigen::Matrix4d& transform);
+
+/// The NDT cost at a pose and its analytic derivatives w.r.t. the pose parameters.
+struct NdtDerivatives {
+  double cost = 0.0;
+  Vector6d gradient = Vector6d::Zero();
+  Matrix6d hessian = Matrix6d::Zero();
 };
 
 /// Aligns source clouds against a target snapshot. Stateless apart from its config: align() is const and may
@@ -82,6 +96,10 @@ class NdtAligner {
   NdtResult align(const VoxelMap& target, const PointCloud& source, const Eigen::Isometry3f& guess) const {
     return align(target, source, guess.matrix());
   }
+
+  /// The cost, gradient and Hessian that align() minimises, at `pose` (finite source points only). For tests and
+  /// for a covariance at a pose found elsewhere.
+  NdtDerivatives derivatives(const VoxelMap& target, const PointCloud& source, const Vector6d& pose) const;
 
  private:
   NdtConfig config_;

@@ -73,7 +73,15 @@ class VoxelMap {
     std::vector<VoxelStats> stats;
     std::vector<VoxelGaussian> gaussians;
 
-    const VoxelGaussian* find(const VoxelKey& key, std::uint64_t hash) const;
+    /// Index of `key` (whose VoxelMap::hash is `hash`) into keys/stats/gaussians, or -1.
+    std::int32_t indexOf(const VoxelKey& key, std::uint64_t hash) const {
+      if (slots.empty()) return -1;
+      const std::size_t mask = slots.size() - 1;
+      for (std::size_t s = hash & mask;; s = (s + 1) & mask) {
+        if (slots[s].index < 0) return -1;
+        if (slots[s].key == key) return slots[s].index;
+      }
+    }
   };
 
   explicit VoxelMap(const VoxelMapParams& params);
@@ -83,7 +91,15 @@ class VoxelMap {
   VoxelKey keyOf(const Eigen::Vector3f& p) const;
 
   /// The Gaussian of voxel `key` if it exists and is valid, else nullptr. The pointer lives as long as this map.
-  const VoxelGaussian* find(const VoxelKey& key) const;
+  const VoxelGaussian* find(const VoxelKey& key) const {
+    const std::uint64_t h = hash(key);
+    const ShardView& v = views_[shardOf(h)];
+    for (std::size_t s = h & v.mask;; s = (s + 1) & v.mask) {
+      const Shard::Slot& slot = v.slots[s];
+      if (slot.index < 0) return nullptr;
+      if (slot.key == key) return v.gaussians[slot.index].valid ? &v.gaussians[slot.index] : nullptr;
+    }
+  }
   /// Statistics of voxel `key` (nullptr when no point fell into it).
   const VoxelStats* stats(const VoxelKey& key) const;
 
@@ -100,13 +116,33 @@ class VoxelMap {
         for (std::size_t i = 0; i < s->keys.size(); ++i) f(s->keys[i], s->stats[i], s->gaussians[i]);
   }
 
-  static std::uint64_t hash(const VoxelKey& key);
+  static std::uint64_t hash(const VoxelKey& k) {
+    // Pack, then the splitmix64 finaliser: shard (top bits) and slot (low bits) both get well-mixed bits.
+    std::uint64_t h = (static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.x)) * 0x9E3779B97F4A7C15ULL) ^
+                      (static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.y)) * 0xC2B2AE3D27D4EB4FULL) ^
+                      (static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.z)) * 0x165667B19E3779F9ULL);
+    h ^= h >> 30;
+    h *= 0xBF58476D1CE4E5B9ULL;
+    h ^= h >> 27;
+    h *= 0x94D049BB133111EBULL;
+    return h ^ (h >> 31);
+  }
+  static std::size_t shardOf(std::uint64_t hash) { return static_cast<std::size_t>(hash >> (64 - kShardBits)); }
 
  private:
   friend class NdtTarget;
   VoxelMapParams params_;
   double inv_resolution_;
+  // Raw views of the shards for the lookup hot path (one dependent load less); an empty shard views kEmptySlot.
+  struct ShardView {
+    const Shard::Slot* slots;
+    const VoxelGaussian* gaussians;
+    std::size_t mask;
+  };
+  void setShard(std::size_t index, std::shared_ptr<const Shard> shard);
+
   std::array<std::shared_ptr<const Shard>, kShards> shards_{};  ///< nullptr = empty shard
+  std::array<ShardView, kShards> views_;
   std::size_t voxels_ = 0, gaussians_ = 0, points_ = 0;
 };
 
@@ -141,7 +177,7 @@ class NdtTarget {
   std::shared_ptr<const VoxelMap> snapshot() const;
 
  private:
-  void apply(const std::vector<std::pair<VoxelKey, VoxelStats>>& delta, bool subtract, std::int64_t points);
+  void apply(const std::vector<std::pair<VoxelKey, VoxelStats>>& delta, bool subtract);
   void publish(std::shared_ptr<const VoxelMap> next);
 
   VoxelMapParams params_;
