@@ -53,3 +53,15 @@ tsan: setup
 	cmake -S $(ROOT)/test/tsan -B $(ROOT)/.catkin_ws/build_tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
 	cmake --build $(ROOT)/.catkin_ws/build_tsan -j2
 	TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(ROOT)/.catkin_ws/build_tsan/test_ndt_concurrency_tsan
+
+# ---------------------------------------------------------------- NDT localizer (issue 4)
+.PHONY: bench-localizer tsan-localizer
+bench-localizer: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_localizer.py
+
+# ThreadSanitizer build of the ROS-free localizer core (update worker, NDT target, localizer) and its
+# gtests in a separate build tree (see test/tsan_localizer); roscpp itself is not instrumented.
+tsan-localizer: setup
+	cmake -S $(ROOT)/test/tsan_localizer -B $(ROOT)/.catkin_ws/build_tsan_localizer -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+	cmake --build $(ROOT)/.catkin_ws/build_tsan_localizer -j2
+	cd $(ROOT) && TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(ROOT)/.catkin_ws/build_tsan_localizer/tsan_localizer_tests
