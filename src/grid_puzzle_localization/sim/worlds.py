@@ -305,10 +305,15 @@ def _split(rect, lot_range: tuple[float, float], rng: np.random.Generator):
 WORLDS: dict[str, Callable[[int, float], World]] = {"courtyard": courtyard, "urban": urban}
 
 
-def make_world(name: str, seed: int, scale: float) -> World:
-    """Builds world ``name`` (one of WORLDS) deterministically from ``seed`` at ``scale`` (0 < scale <= 1)."""
+def check_world(name: str) -> str:
     if name not in WORLDS:
         raise UserError(f"unknown scenario {name!r}: choose one of {', '.join(WORLDS)}")
-    if not (0.0 < scale <= 1.0):
-        raise UserError(f"--scale must be in (0, 1] (got {scale}); for example --scale 0.25")
+    return name
+
+
+def make_world(name: str, seed: int, scale: float) -> World:
+    """Builds world ``name`` (one of WORLDS) deterministically from ``seed`` at ``scale`` (0.2 <= scale <= 1)."""
+    check_world(name)
+    if not (0.2 <= scale <= 1.0):
+        raise UserError(f"--scale must be between 0.2 and 1 (got {scale}); for example --scale 0.25")
     return WORLDS[name](seed, scale)
