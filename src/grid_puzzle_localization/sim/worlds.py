@@ -96,12 +96,15 @@ def _building(b: MeshBuilder, ground: Ground, rect, height: float, refl: float, 
         b.add(meshes.box(x0 + setback, y0 + setback, x1 - setback, y1 - setback, zmax + height, zmax + 1.6 * height), refl)
 
 
-def _tree(b: MeshBuilder, ground: Ground, x: float, y: float, rng: np.random.Generator) -> None:
-    z = float(ground.height(np.array(x), np.array(y)))
-    trunk_h = rng.uniform(2.2, 3.5)
+def _tree(b: MeshBuilder, place: Placement, ground: Ground, x: float, y: float, rng: np.random.Generator) -> None:
+    """A trunk and an ellipsoid crown starting 2.5-3.5 m up; its footprint (the crown) avoids paths."""
     crown = rng.uniform(1.5, 3.2)
+    if not place.try_take((x - crown, y - crown, x + crown, y + crown), clearance=0.3, gap=-crown):
+        return
+    z = float(ground.height(np.array(x), np.array(y)))
+    trunk_h = rng.uniform(2.5, 3.5)
     b.add(meshes.prism(x, y, rng.uniform(0.12, 0.3), z - 0.3, z + trunk_h + 0.5, sides=7), 0.3)
-    b.add(meshes.ellipsoid(x, y, z + trunk_h + crown * 0.9, crown, crown, crown * 1.1), 0.55)
+    b.add(meshes.ellipsoid(x, y, z + trunk_h + crown * 1.1, crown, crown, crown * 1.1), 0.55)
 
 
 def _pole(b: MeshBuilder, ground: Ground, x: float, y: float, height: float) -> None:
@@ -141,12 +144,12 @@ def _diagonal_cells(rng: np.random.Generator, nx: int, ny: int, count: int) -> l
 def courtyard(seed: int, scale: float) -> World:
     rng = np.random.default_rng([seed, 101])
     ext_x, ext_y = 150.0 * scale, 200.0 * scale
-    band = max(6.0, min(18.0, 0.12 * min(ext_x, ext_y)))
+    band = max(12.0, min(18.0, 0.12 * min(ext_x, ext_y)))
     xs, ys = _cells(3, ext_x - 2 * band, scale, 1), _cells(4, ext_y - 2 * band, scale, 2)
     path_hw = 2.0
     graph = grid_graph(xs, ys, np.full(len(xs), path_hw), np.full(len(ys), path_hw))
     nx, ny = len(xs) - 1, len(ys) - 1
-    graph = add_diagonals(graph, len(ys), _diagonal_cells(rng, nx, ny, max(2, (nx * ny) // 3)), path_hw)
+    graph = add_diagonals(graph, len(ys), _diagonal_cells(rng, nx, ny, (nx * ny) // 3), path_hw)
     extent = (-ext_x / 2, -ext_y / 2, ext_x / 2, ext_y / 2)
     ground = Ground(*rng.uniform(-0.02, 0.02, 2), 1.0, 120.0, *rng.uniform(0, 2 * np.pi, 2))
     b = MeshBuilder()
@@ -191,8 +194,7 @@ def courtyard(seed: int, scale: float) -> World:
                     b.add(meshes.box(*rect[:2], *rect[2:], zmin - 0.3, zmax + rng.uniform(0.8, 2.5)), 0.5)
             for _ in range(int(w * h / 50)):  # trees in the courtyard
                 x, y = rng.uniform(cx0, cx1), rng.uniform(cy0, cy1)
-                if place.try_take((x - 0.6, y - 0.6, x + 0.6, y + 0.6), clearance=0.6, gap=2.5):
-                    _tree(b, ground, x, y, rng)
+                _tree(b, place, ground, x, y, rng)
     for (x, y), u, _ in _along_edges(graph, 9.0, lambda hw: hw + 0.6, rng):
         _pole(b, ground, x, y, rng.uniform(3.5, 5.0))
     for (x, y), u, _ in _along_edges(graph, 15.0, lambda hw: hw + 1.2, rng):
@@ -212,8 +214,8 @@ def _ring_lots(extent, band: float, rng: np.random.Generator, lot: tuple[float, 
     for horizontal, fixed0, fixed1, start, stop in (
         (True, y0, y0 + band, x0, x1),
         (True, y1 - band, y1, x0, x1),
-        (False, x0, x0 + band, y0 + band, y1 - band),
-        (False, x1 - band, x1, y0 + band, y1 - band),
+        (False, x0, x0 + band, y0 + band + 2.5, y1 - band - 2.5),
+        (False, x1 - band, x1, y0 + band + 2.5, y1 - band - 2.5),
     ):
         s = start
         while s < stop - 4.0:
@@ -232,7 +234,7 @@ def urban(seed: int, scale: float) -> World:
     hx, hy = rng.choice(widths, len(xs)) / 2, rng.choice(widths, len(ys)) / 2
     graph = grid_graph(xs, ys, hx, hy)
     nx, ny = len(xs) - 1, len(ys) - 1
-    graph = add_diagonals(graph, len(ys), _diagonal_cells(rng, nx, ny, max(2, (nx * ny) // 8)), 6.0)
+    graph = add_diagonals(graph, len(ys), _diagonal_cells(rng, nx, ny, (nx * ny) // 8), 6.0)
     extent = (-ext_x / 2, -ext_y / 2, ext_x / 2, ext_y / 2)
     ground = Ground(*rng.uniform(-0.03, 0.03, 2), 3.0, 300.0, *rng.uniform(0, 2 * np.pi, 2))
     b = MeshBuilder()
@@ -261,15 +263,14 @@ def urban(seed: int, scale: float) -> World:
             if rng.random() < 0.15:  # a park
                 for _ in range(int((rect[2] - rect[0]) * (rect[3] - rect[1]) / 150)):
                     x, y = rng.uniform(rect[0], rect[2]), rng.uniform(rect[1], rect[3])
-                    if place.try_take((x - 0.6, y - 0.6, x + 0.6, y + 0.6), clearance=1.0, gap=3.0):
-                        _tree(b, ground, x, y, rng)
+                    _tree(b, place, ground, x, y, rng)
             else:
                 block(rect, (15.0, 40.0))
     for (x, y), _, _ in _along_edges(graph, 28.0, lambda hw: hw + 1.0, rng):
         _pole(b, ground, x, y, rng.uniform(7.0, 9.0))
     for (x, y), _, hw in _along_edges(graph, 16.0, lambda hw: hw + 2.0, rng):
-        if rng.random() < 0.6 and place.try_take((x - 0.5, y - 0.5, x + 0.5, y + 0.5), clearance=0.5, gap=0.5):
-            _tree(b, ground, x, y, rng)
+        if rng.random() < 0.6:
+            _tree(b, place, ground, x, y, rng)
     for (x, y), u, hw in _along_edges(graph, 7.0, lambda hw: hw - 1.2, rng):
         if hw >= 7.0 and rng.random() < 0.5:
             _car(b, ground, x, y, float(np.arctan2(u[1], u[0])), rng)
