@@ -25,6 +25,7 @@ from grid_puzzle_localization.sim.worlds import Ground, World
 
 RATE = 200.0  # [Hz] pose sampling rate (also the IMU rate)
 _GEOM_STEP = 0.05  # [m] spacing of the dense lane curve
+REST = 2.0  # [s] standing still at the start (lets an IMU initialise) and at the end
 
 
 @dataclass(frozen=True)
@@ -200,6 +201,16 @@ def _timing(v: np.ndarray, dwell: np.ndarray, step: float) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(dt + dwell[:-1])])
 
 
+def _arc_length_at(t: np.ndarray, s: np.ndarray, v: np.ndarray, dwell: np.ndarray, t_knots: np.ndarray) -> np.ndarray:
+    """Arc length at times ``t``: after the dwell at knot i, constant acceleration from v[i] to v[i+1]."""
+    i = np.clip(np.searchsorted(t_knots, t, side="right") - 1, 0, len(s) - 2)
+    step = s[i + 1] - s[i]
+    moving = 2 * step / np.maximum(v[i] + v[i + 1], 1e-9)
+    accel = (v[i + 1] - v[i]) / moving
+    tau = np.clip(t - t_knots[i] - dwell[i], 0.0, moving)
+    return s[i] + np.minimum(v[i] * tau + 0.5 * accel * tau**2, step)
+
+
 def make_trajectory(
     graph: PathGraph, ground: Ground, route: list[int], prof: MotionProfile, length: float | None, rng: np.random.Generator
 ) -> Trajectory:
@@ -220,6 +231,7 @@ def make_trajectory(
     stops = np.unique(np.searchsorted(s, stop_at))
     dwell = np.zeros(len(s))
     dwell[stops] = rng.uniform(*prof.stop_time, len(stops))
+    dwell[0] = REST
 
     target = total / prof.speed_avg
     lo, hi = prof.speed_avg, 6.0 * prof.speed_avg
@@ -229,13 +241,8 @@ def make_trajectory(
         lo, hi = (mid, hi) if t_end > target else (lo, mid)
     v = _speed_profile(kappa, stops, hi, prof)
     t_knots = _timing(v, dwell, prof.speed_step)
-    # A stop holds s while time advances by the dwell: duplicate the knot.
-    t_all = np.concatenate([t_knots, t_knots[stops] + dwell[stops]])
-    s_all = np.concatenate([s, s[stops]])
-    order = np.lexsort((s_all, t_all))
-    t_all, s_all = t_all[order], s_all[order]
-    times = np.arange(0.0, t_all[-1], 1.0 / RATE)
-    s_t = np.interp(times, t_all, s_all)
+    times = np.arange(0.0, t_knots[-1] + REST, 1.0 / RATE)
+    s_t = _arc_length_at(times, s, v, dwell, t_knots)
     sigma = prof.smooth_sigma * RATE
     xy = np.stack([np.interp(s_t, s_geom, pts[:, 0]), np.interp(s_t, s_geom, pts[:, 1])], axis=1)
     xy = gaussian_filter1d(xy, sigma, axis=0, mode="nearest")
@@ -268,11 +275,12 @@ def localization_trajectory(world: World, scale: float, rng: np.random.Generator
 
 
 def mapping_trajectory(world: World, loc: Trajectory, rng: np.random.Generator) -> Trajectory:
-    """The separate mapping run: the nodes the localization run passed (plus the next one), driven in the
-    opposite direction, so the lane (and the stops and timing) differ from the localization pass."""
+    """The separate mapping run: the route nodes from the localization run's start to the first node past
+    its end, driven in the opposite direction, so the lane (and the stops and timing) differ from the
+    localization pass while covering it."""
     graph = world.graph
     route = list(loc.route)
     s_nodes = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(graph.nodes[route], axis=0), axis=1))])
     first_after = int(np.searchsorted(s_nodes, loc.length()))
-    keep = route[: max(2, min(len(route), first_after + 2))]
+    keep = route[: max(2, min(len(route), first_after + 1))]
     return make_trajectory(graph, world.ground, keep[::-1], PROFILES[world.name], None, rng)
