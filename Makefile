@@ -31,3 +31,8 @@ demo: build
 
 clean:
 	rm -rf $(ROOT)/.catkin_ws $(ROOT)/test_results
+
+# --- scenario simulator (gpm simulate) ---
+.PHONY: bench-sim
+bench-sim: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_sim.py

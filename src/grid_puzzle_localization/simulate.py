@@ -12,9 +12,15 @@ from grid_puzzle_localization.sim.worlds import WORLDS
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scenario", help=f"world to simulate: {', '.join(WORLDS)}")
     parser.add_argument("-o", "--output", help="output directory (default: ./<scenario>); must not exist")
-    parser.add_argument("--sensor", help=f"LiDAR model: {', '.join(SENSORS)} (default: livox for courtyard, hdl32 for urban)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed; the same seed gives identical files (default 0)")
-    parser.add_argument("--scale", type=float, default=1.0, help="world extent and route length factor, 0.2-1 (default 1)")
+    parser.add_argument(
+        "--sensor", help=f"LiDAR model: {', '.join(SENSORS)} (default: livox for courtyard, hdl32 for urban)"
+    )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="random seed; the same seed gives identical files (default 0)"
+    )
+    parser.add_argument(
+        "--scale", type=float, default=1.0, help="world extent and route length factor, 0.2-1 (default 1)"
+    )
     parser.add_argument("--duration", type=float, help="seconds of the localization run (default: the whole route)")
     parser.add_argument(
         "--map-density", type=float, help="voxel size of the prior map [m] (default 0.05 courtyard, 0.1 urban)"

@@ -1,5 +1,6 @@
 """Ray casting and beam patterns of the simulator against closed forms."""
 
+import itertools
 from dataclasses import replace
 
 import numpy as np
@@ -73,7 +74,9 @@ def test_motion_distortion_uses_each_rays_own_pose():
     """A single horizontal ring moving at 10 m/s towards a wall: the forward ray fires half a sweep in,
     so its range is shorter by exactly v * t than at the sweep start."""
     wall_x, v = 40.0, 10.0
-    sensor = SpinningLidar("one_ring", 10.0, 0.1, 200.0, 0.0, 0.0, rings=1, elevation_min_deg=0.0, elevation_max_deg=0.0, columns=360)
+    sensor = SpinningLidar(
+        "one_ring", 10.0, 0.1, 200.0, 0.0, 0.0, rings=1, elevation_min_deg=0.0, elevation_max_deg=0.0, columns=360
+    )
     mesh = _box_world(wall_x, -100.0, wall_x + 1.0, 100.0, -50.0, 50.0)
     mount = Mount(np.array([0.3, 0.0, 1.0]), np.eye(3))
     with RayCaster(mesh) as caster:
@@ -114,7 +117,7 @@ def test_livox_coverage_grows_over_frames_and_hdl_repeats():
     el = np.degrees(np.arcsin(np.concatenate(frames)[:, 2]))
     assert el.min() >= -7.0 - 1e-9 and el.max() <= 52.0 + 1e-9
     cov = [_coverage(np.concatenate(frames[:n]), 0.5, -7.0, 52.0) for n in (1, 2, 5, 10)]
-    assert all(a < b for a, b in zip(cov, cov[1:]))
+    assert all(a < b for a, b in itertools.pairwise(cov))
     assert cov[0] < 0.3 and cov[-1] > 0.85
     # Frames differ: no direction of frame 0 reappears in frame 1.
     assert not np.any(np.all(np.isclose(frames[0][:100, None], frames[1][None, :100]), axis=2))
@@ -126,7 +129,9 @@ def test_livox_coverage_grows_over_frames_and_hdl_repeats():
 
 def test_mount_rotation_is_applied():
     """A lidar pitched down by 90 deg (looking at the floor with its x axis): the x-axis ray measures height."""
-    sensor = SpinningLidar("one_ring", 10.0, 0.1, 200.0, 0.0, 0.0, rings=1, elevation_min_deg=0.0, elevation_max_deg=0.0, columns=360)
+    sensor = SpinningLidar(
+        "one_ring", 10.0, 0.1, 200.0, 0.0, 0.0, rings=1, elevation_min_deg=0.0, elevation_max_deg=0.0, columns=360
+    )
     mesh = _box_world(-50.0, -50.0, 50.0, 50.0, -5.0, 0.0)
     rot = Rotation.from_euler("y", 90, degrees=True).as_matrix()
     with RayCaster(mesh) as caster:

@@ -7,7 +7,13 @@ from scipy.spatial.transform import Rotation
 from grid_puzzle_localization.sim import worlds
 from grid_puzzle_localization.sim.imu import GRAVITY, ImuNoise, simulate_imu, true_motion
 from grid_puzzle_localization.sim.scenario import _rng
-from grid_puzzle_localization.sim.trajectory import PROFILES, RATE, Trajectory, localization_trajectory, mapping_trajectory
+from grid_puzzle_localization.sim.trajectory import (
+    PROFILES,
+    RATE,
+    Trajectory,
+    localization_trajectory,
+    mapping_trajectory,
+)
 
 SECTORS = [(-20, 20), (20, 70), (70, 110), (110, 160), (160, 200), (200, 250), (250, 290), (290, 340)]
 
@@ -72,7 +78,7 @@ def test_duration_truncates_exactly():
 def test_imu_matches_kinematics_and_noise_model():
     world = worlds.make_world("urban", 0, 0.25)
     traj = localization_trajectory(world, 0.25, _rng(0, 1)).truncated(120.0)
-    gyro, accel, velocity = true_motion(traj)
+    gyro, accel, _ = true_motion(traj)
     # Integrating the true yaw rate (body z, nearly vertical) reproduces the heading change.
     yaw = np.unwrap(traj.yaw())
     up = Rotation.from_quat(traj.quat).apply(gyro)[:, 2]

@@ -43,7 +43,7 @@ class BagNames:
 
 def _stamp(t: float) -> rospy.Time:
     """Exact nanosecond stamp of ``t`` seconds (rounded once, so equal inputs give equal bytes)."""
-    return rospy.Time(nsecs=int(round(t * 1e9)))
+    return rospy.Time(nsecs=round(t * 1e9))
 
 
 def _point_fields(dtype: np.dtype) -> list[PointField]:

@@ -63,7 +63,11 @@ def drifted(truth: Trajectory, bounds: DriftBounds, rng: np.random.Generator) ->
     scale = bounds.horizontal / max(float(horizontal.max()), 1e-12)
     dp = np.stack([dx * scale, dy * scale, bounds.vertical * _smooth_signal(t, rng)], axis=1)
     angles = np.stack(
-        [bounds.tilt * _smooth_signal(t, rng), bounds.tilt * _smooth_signal(t, rng), bounds.yaw * _smooth_signal(t, rng)],
+        [
+            bounds.tilt * _smooth_signal(t, rng),
+            bounds.tilt * _smooth_signal(t, rng),
+            bounds.yaw * _smooth_signal(t, rng),
+        ],
         axis=1,
     )
     # Each error angle stays within its bound because the small rotations are applied as one rotation vector.

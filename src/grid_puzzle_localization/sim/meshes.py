@@ -92,7 +92,10 @@ def prism(cx: float, cy: float, radius: float, z0: float, z1: float, sides: int 
     j = (i + 1) % sides
     sides_f = np.concatenate([np.stack([i, j, i + sides], 1), np.stack([j, j + sides, i + sides], 1)])
     caps = np.concatenate(
-        [np.stack([np.zeros(sides - 2, int), i[1:-1], i[2:]], 1), sides + np.stack([np.zeros(sides - 2, int), i[2:], i[1:-1]], 1)]
+        [
+            np.stack([np.zeros(sides - 2, int), i[1:-1], i[2:]], 1),
+            sides + np.stack([np.zeros(sides - 2, int), i[2:], i[1:-1]], 1),
+        ]
     )
     return v, np.concatenate([sides_f, caps])
 

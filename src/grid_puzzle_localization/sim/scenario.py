@@ -70,7 +70,16 @@ class ScenarioConfig:
         if self.threads < 1:
             raise UserError(f"--threads must be at least 1 (got {self.threads})")
         return ScenarioConfig(
-            self.world, sensor, self.seed, self.scale, self.duration, leaf, self.start_time, self.threads, self.drift, self.imu_noise
+            self.world,
+            sensor,
+            self.seed,
+            self.scale,
+            self.duration,
+            leaf,
+            self.start_time,
+            self.threads,
+            self.drift,
+            self.imu_noise,
         )
 
 
@@ -85,7 +94,8 @@ class Summary:
     points: int
     map_sweeps: int
     map_rays: int
-    map_points: int
+    map_points_in: int  # points accumulated into the voxel filter
+    map_points: int  # points in global_map.pcd
     seconds_localization: float
     seconds_mapping: float
 
@@ -99,7 +109,7 @@ def _progress(total: int, desc: str, show: bool):
 
 
 def _write_tum(path: Path, t0: float, traj: Trajectory) -> None:
-    step = int(round(RATE / GROUND_TRUTH_RATE))
+    step = round(RATE / GROUND_TRUTH_RATE)
     stamps = t0 + traj.times[::step]
     data = np.column_stack([stamps, traj.position[::step], traj.quat[::step]])
     np.savetxt(path, data, fmt=["%.6f"] + ["%.6f"] * 3 + ["%.9f"] * 4, header="timestamp tx ty tz qx qy qz qw")
@@ -114,8 +124,8 @@ def _write_bag(path: Path, cfg: ScenarioConfig, sim: SweepSimulator, traj: Traje
     vel_body = Rotation.from_quat(traj.quat).inv().apply(velocity)
     gyro_var = (cfg.imu_noise.gyro_noise_density**2) * RATE
     accel_var = (cfg.imu_noise.accel_noise_density**2) * RATE
-    gt_step = int(round(RATE / GROUND_TRUTH_RATE))
-    samples_per_sweep = int(round(RATE / sensor.rate))
+    gt_step = round(RATE / GROUND_TRUTH_RATE)
+    samples_per_sweep = round(RATE / sensor.rate)
     n_sweeps = int(np.floor(traj.duration * sensor.rate + 1e-9))
     rng = _rng(cfg.seed, 4)
     rays = points = 0
@@ -147,19 +157,20 @@ def _write_map(path: Path, cfg: ScenarioConfig, sim: SweepSimulator, traj: Traje
     sensor = sim.sensor
     rng = _rng(cfg.seed, 5)
     n_sweeps = int(np.floor(traj.duration * sensor.rate + 1e-9))
-    rays = 0
+    rays = points = 0
     with _progress(n_sweeps, "mapping run", show) as bar:
         for k in range(n_sweeps):
             sweep = sensor.sweep(k)
             cloud = sim.simulate(traj, k / sensor.rate, sweep, rng)
             voxels.add(to_map(estimate, mount, k / sensor.rate, cloud), cloud["intensity"])
             rays += len(sweep.dt)
+            points += len(cloud)
             bar.update()
     with PcdStreamWriter(path, MAP_DTYPE) as writer:
         for chunk in voxels.chunks():
             writer.append(chunk)
         count = writer.points
-    return n_sweeps, rays, count
+    return n_sweeps, rays, points, count
 
 
 def _describe(cfg: ScenarioConfig, world, loc: Trajectory, mapping: Trajectory, mount: Mount) -> dict:
@@ -170,7 +181,10 @@ def _describe(cfg: ScenarioConfig, world, loc: Trajectory, mapping: Trajectory, 
         "parameters": params,
         "world": {"extent_m": [float(v) for v in world.extent], "triangles": len(world.mesh.faces)},
         "sensor": {k: (v if not isinstance(v, float) else float(v)) for k, v in asdict(sensor).items()},
-        "mount_base_link_to_lidar": {"translation_m": [float(v) for v in mount.translation], "quaternion_xyzw": [0.0, 0.0, 0.0, 1.0]},
+        "mount_base_link_to_lidar": {
+            "translation_m": [float(v) for v in mount.translation],
+            "quaternion_xyzw": [0.0, 0.0, 0.0, 1.0],
+        },
         "localization_run": {
             "duration_s": float(loc.duration),
             "length_m": round(loc.length(), 3),
@@ -183,7 +197,9 @@ def _describe(cfg: ScenarioConfig, world, loc: Trajectory, mapping: Trajectory, 
     }
 
 
-def generate(cfg: ScenarioConfig, out_dir: str | os.PathLike, overwrite: bool = False, progress: bool = True) -> Summary:
+def generate(
+    cfg: ScenarioConfig, out_dir: str | os.PathLike, overwrite: bool = False, progress: bool = True
+) -> Summary:
     """Simulates the scenario ``cfg`` into ``out_dir`` (must not exist unless ``overwrite``)."""
     cfg = cfg.resolved()
     world = make_world(cfg.world, cfg.seed, cfg.scale)
@@ -203,12 +219,16 @@ def generate(cfg: ScenarioConfig, out_dir: str | os.PathLike, overwrite: bool = 
     try:
         with RayCaster(world.mesh, cfg.threads) as caster:
             sim = SweepSimulator(world.mesh, caster, get_sensor(cfg.sensor), mount)
-            (tmp / "scenario.yaml").write_text(yaml.safe_dump(_describe(cfg, world, loc, mapping, mount), sort_keys=False))
+            (tmp / "scenario.yaml").write_text(
+                yaml.safe_dump(_describe(cfg, world, loc, mapping, mount), sort_keys=False)
+            )
             _write_tum(tmp / "ground_truth.tum", cfg.start_time, loc)
             start = time.perf_counter()
             sweeps, rays, points = _write_bag(tmp / "scenario.bag", cfg, sim, loc, mount, progress)
             mid = time.perf_counter()
-            map_sweeps, map_rays, map_points = _write_map(tmp / "global_map.pcd", cfg, sim, mapping, mount, progress)
+            map_sweeps, map_rays, map_in, map_points = _write_map(
+                tmp / "global_map.pcd", cfg, sim, mapping, mount, progress
+            )
             end = time.perf_counter()
         for name in FILES:
             with open(tmp / name, "rb") as f:
@@ -224,4 +244,6 @@ def generate(cfg: ScenarioConfig, out_dir: str | os.PathLike, overwrite: bool = 
         with contextlib.suppress(OSError):
             shutil.rmtree(tmp)
         raise
-    return Summary(out, loc.duration, sweeps, rays, points, map_sweeps, map_rays, map_points, mid - start, end - mid)
+    return Summary(
+        out, loc.duration, sweeps, rays, points, map_sweeps, map_rays, map_in, map_points, mid - start, end - mid
+    )

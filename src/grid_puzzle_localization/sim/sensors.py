@@ -93,7 +93,7 @@ class NonRepetitiveLidar(Lidar):
 
     @property
     def rays_per_sweep(self) -> int:
-        return int(round(self.rays_per_second / self.rate))
+        return round(self.rays_per_second / self.rate)
 
     def sweep(self, index: int) -> Sweep:
         n = self.rays_per_sweep

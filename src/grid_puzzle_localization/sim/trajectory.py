@@ -212,7 +212,12 @@ def _arc_length_at(t: np.ndarray, s: np.ndarray, v: np.ndarray, dwell: np.ndarra
 
 
 def make_trajectory(
-    graph: PathGraph, ground: Ground, route: list[int], prof: MotionProfile, length: float | None, rng: np.random.Generator
+    graph: PathGraph,
+    ground: Ground,
+    route: list[int],
+    prof: MotionProfile,
+    length: float | None,
+    rng: np.random.Generator,
 ) -> Trajectory:
     """Drives ``route`` (node indices) with profile ``prof``, cut at ``length`` metres of lane (the whole
     route when None)."""

@@ -40,9 +40,7 @@ class Ground:
     def height(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         k = 2 * np.pi / self.wave
         return (
-            self.tilt_x * x
-            + self.tilt_y * y
-            + self.amp * np.sin(k * x + self.phase_x) * np.sin(k * y + self.phase_y)
+            self.tilt_x * x + self.tilt_y * y + self.amp * np.sin(k * x + self.phase_x) * np.sin(k * y + self.phase_y)
         )
 
     def gradient(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -93,7 +91,9 @@ def _building(b: MeshBuilder, ground: Ground, rect, height: float, refl: float, 
     x0, y0, x1, y1 = rect
     b.add(meshes.box(x0, y0, x1, y1, zmin - 1.0, zmax + height), refl)
     if setback > 0 and min(x1 - x0, y1 - y0) > 2 * setback + 4:
-        b.add(meshes.box(x0 + setback, y0 + setback, x1 - setback, y1 - setback, zmax + height, zmax + 1.6 * height), refl)
+        b.add(
+            meshes.box(x0 + setback, y0 + setback, x1 - setback, y1 - setback, zmax + height, zmax + 1.6 * height), refl
+        )
 
 
 def _tree(b: MeshBuilder, place: Placement, ground: Ground, x: float, y: float, rng: np.random.Generator) -> None:
@@ -195,7 +195,7 @@ def courtyard(seed: int, scale: float) -> World:
             for _ in range(int(w * h / 50)):  # trees in the courtyard
                 x, y = rng.uniform(cx0, cx1), rng.uniform(cy0, cy1)
                 _tree(b, place, ground, x, y, rng)
-    for (x, y), u, _ in _along_edges(graph, 9.0, lambda hw: hw + 0.6, rng):
+    for (x, y), _, _ in _along_edges(graph, 9.0, lambda hw: hw + 0.6, rng):
         _pole(b, ground, x, y, rng.uniform(3.5, 5.0))
     for (x, y), u, _ in _along_edges(graph, 15.0, lambda hw: hw + 1.2, rng):
         rect = (x - 0.9, y - 0.9, x + 0.9, y + 0.9)
@@ -245,7 +245,6 @@ def urban(seed: int, scale: float) -> World:
         return float(np.clip(rng.lognormal(np.log(16.0), 0.7), 6.0, 100.0))
 
     def block(rect, lot_range):
-        x0, y0, x1, y1 = rect
         for lx0, ly0, lx1, ly1 in _split(rect, lot_range, rng):
             lot = (lx0 + 0.8, ly0 + 0.8, lx1 - 0.8, ly1 - 0.8)
             if place.try_take(lot, clearance=3.0, gap=0.5):
@@ -268,7 +267,7 @@ def urban(seed: int, scale: float) -> World:
                 block(rect, (15.0, 40.0))
     for (x, y), _, _ in _along_edges(graph, 28.0, lambda hw: hw + 1.0, rng):
         _pole(b, ground, x, y, rng.uniform(7.0, 9.0))
-    for (x, y), _, hw in _along_edges(graph, 16.0, lambda hw: hw + 2.0, rng):
+    for (x, y), _, _ in _along_edges(graph, 16.0, lambda hw: hw + 2.0, rng):
         if rng.random() < 0.6:
             _tree(b, place, ground, x, y, rng)
     for (x, y), u, hw in _along_edges(graph, 7.0, lambda hw: hw - 1.2, rng):
