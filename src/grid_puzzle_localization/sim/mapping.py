@@ -115,31 +115,35 @@ class VoxelMap:
         idx = np.floor(xyz / self.leaf).astype(np.int64)
         offset = xyz - idx * self.leaf
         key = ((idx[:, 0] + _OFFSET) << 42) | ((idx[:, 1] + _OFFSET) << 21) | (idx[:, 2] + _OFFSET)
-        tile = ((idx[:, 0] >> _TILE_SHIFT) << 32) + (idx[:, 1] >> _TILE_SHIFT)
+        # Reduce the batch to per-voxel sums first (many points share a voxel), then merge tile by tile.
+        key, inv = np.unique(key, return_inverse=True)
+        count = np.bincount(inv).astype(np.float64)
+        sums = np.stack([np.bincount(inv, weights=offset[:, j]) for j in range(3)], axis=1)
+        sum_i = np.bincount(inv, weights=inten)
+        mask = (1 << 21) - 1
+        tile = (((key >> 42) & mask) >> _TILE_SHIFT) << 32 | (((key >> 21) & mask) >> _TILE_SHIFT)
         order = np.argsort(tile, kind="stable")
-        tile, key, offset, inten = tile[order], key[order], offset[order], inten[order]
+        tile, key, sums, sum_i, count = tile[order], key[order], sums[order], sum_i[order], count[order]
         starts = np.flatnonzero(np.concatenate([[True], tile[1:] != tile[:-1]]))
         ends = np.append(starts[1:], len(tile))
         for a, b in zip(starts, ends, strict=True):
-            self._merge(int(tile[a]), key[a:b], offset[a:b], inten[a:b])
+            self._merge(int(tile[a]), key[a:b], sums[a:b], sum_i[a:b], count[a:b])
 
-    def _merge(self, tile: int, key: np.ndarray, offset: np.ndarray, inten: np.ndarray) -> None:
-        count = np.ones(len(key))
+    def _merge(self, tile: int, key: np.ndarray, sums: np.ndarray, sum_i: np.ndarray, count: np.ndarray) -> None:
+        """Adds per-voxel sums (``key`` sorted and unique) to a tile's running means."""
         if tile in self._tiles:
             k0, o0, i0, c0 = self._tiles[tile]
             c0 = c0.astype(np.float64)
             key = np.concatenate([k0, key])
-            offset = np.concatenate([o0.astype(np.float64) * c0[:, None], offset])
-            inten = np.concatenate([i0.astype(np.float64) * c0, inten])
+            sums = np.concatenate([o0.astype(np.float64) * c0[:, None], sums])
+            sum_i = np.concatenate([i0.astype(np.float64) * c0, sum_i])
             count = np.concatenate([c0, count])
-        else:
-            offset = offset.copy()
-        uniq, inv = np.unique(key, return_inverse=True)
-        n = np.bincount(inv, weights=count, minlength=len(uniq))
-        mean = np.stack([np.bincount(inv, weights=offset[:, j], minlength=len(uniq)) for j in range(3)], axis=1)
-        mean /= n[:, None]
-        mean_i = np.bincount(inv, weights=inten, minlength=len(uniq)) / n
-        self._tiles[tile] = (uniq, mean.astype(np.float32), mean_i.astype(np.float32), n.astype(np.uint32))
+            key, inv = np.unique(key, return_inverse=True)
+            sums = np.stack([np.bincount(inv, weights=sums[:, j]) for j in range(3)], axis=1)
+            sum_i = np.bincount(inv, weights=sum_i)
+            count = np.bincount(inv, weights=count)
+        mean = (sums / count[:, None]).astype(np.float32)
+        self._tiles[tile] = (key, mean, (sum_i / count).astype(np.float32), count.astype(np.uint32))
 
     def chunks(self) -> Iterator[np.ndarray]:
         """The filtered map (MAP_DTYPE), one tile per chunk, tiles and voxels in a fixed order."""
