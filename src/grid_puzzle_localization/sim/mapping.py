@@ -28,7 +28,7 @@ from grid_puzzle_localization.sim.trajectory import RATE, Trajectory, rotate
 MAP_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4")])
 _OFFSET = 1 << 20  # voxel indices are stored biased by this, 21 bits per axis
 _TILE_SHIFT = 8  # tiles of 256 x 256 voxels
-_FLUSH_POINTS = 4_000_000  # merge pending points into the tiles once this many are waiting
+_FLUSH_POINTS = 2_000_000  # merge pending points into the tiles once this many are waiting
 
 
 @dataclass(frozen=True)
