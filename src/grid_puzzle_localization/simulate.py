@@ -26,6 +26,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--map-density", type=float, help="voxel size of the prior map [m] (default 0.05 courtyard, 0.1 urban)"
     )
     parser.add_argument("--start-time", type=float, default=1.7e9, help="bag time of the first sample [s since epoch]")
+    parser.add_argument(
+        "--movers",
+        type=int,
+        help="moving pedestrians/cars in the scans, not in the map (default 12 x scale / 20 x scale in urban)",
+    )
     parser.add_argument("--threads", type=int, default=2, help="ray-casting threads (default 2)")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing output directory")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -41,6 +46,7 @@ def run(args: argparse.Namespace) -> int:
         map_leaf=args.map_density,
         start_time=args.start_time,
         threads=args.threads,
+        movers=args.movers,
     )
     summary = generate(cfg, args.output or args.scenario, overwrite=args.overwrite, progress=not args.quiet)
     print(

@@ -33,9 +33,25 @@ def tiny(tmp_path_factory):
 def test_same_seed_gives_byte_identical_files(tiny, tmp_path):
     for name in FILES:
         assert filecmp.cmp(tiny / "a" / name, tiny / "b" / name, shallow=False), name
-    other = ScenarioConfig(world="courtyard", seed=8, scale=0.25, duration=1.0, map_leaf=0.2)
-    generate(other, tmp_path / "c", progress=False)
-    assert not filecmp.cmp(tiny / "a" / "scenario.bag", tmp_path / "c" / "scenario.bag", shallow=False)
+    a, b = worlds.make_world("courtyard", 7, 0.25).mesh, worlds.make_world("courtyard", 8, 0.25).mesh
+    assert a.vertices.shape != b.vertices.shape or not np.array_equal(a.vertices, b.vertices)
+
+
+def test_movers_are_in_the_scans_but_not_in_the_map(tiny, tmp_path):
+    meta = yaml.safe_load((tiny / "a" / "scenario.yaml").read_text())
+    assert meta["movers"] == {"pedestrian": 3}
+    still = ScenarioConfig(world="courtyard", seed=7, scale=0.25, duration=1.0, map_leaf=0.2, movers=0)
+    generate(still, tmp_path / "still", progress=False)
+    assert filecmp.cmp(tiny / "a" / "global_map.pcd", tmp_path / "still" / "global_map.pcd", shallow=False)
+    assert filecmp.cmp(tiny / "a" / "ground_truth.tum", tmp_path / "still" / "ground_truth.tum", shallow=False)
+    with (
+        rosbag.Bag(str(tiny / "a" / "scenario.bag")) as moving,
+        rosbag.Bag(str(tmp_path / "still" / "scenario.bag")) as bag,
+    ):
+        clouds = [m for _, m, _ in moving.read_messages(topics=["points"])]
+        static = [m for _, m, _ in bag.read_messages(topics=["points"])]
+    assert len(clouds) == len(static)
+    assert any(a.data != b.data for a, b in zip(clouds, static, strict=True))
 
 
 def test_bag_has_the_right_topics_types_frames_and_stamps(tiny):

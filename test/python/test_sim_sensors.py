@@ -139,3 +139,23 @@ def test_mount_rotation_is_applied():
         pts = sim.simulate(_straight([0, 0, 0], [0, 0, 0], 1.0), 0.0, sensor.sweep(0), np.random.default_rng(0))
     forward = pts[(np.abs(pts["y"]) < 1e-6) & (pts["x"] > 0)]
     assert forward["x"][0] == pytest.approx(2.0, abs=1e-4)
+
+
+def test_movers_occlude_the_static_world():
+    """A mover box between the sensor and a wall: rays through it return its range, the rest the wall's."""
+    wall = _box_world(20.0, -50.0, 21.0, 50.0, -10.0, 10.0)
+    b = MeshBuilder()
+    b.add(meshes.box(5.0, -1.0, 6.0, 1.0, -10.0, 10.0), 0.9)
+    mover = b.build()
+    sensor = SpinningLidar(
+        "one_ring", 10.0, 0.1, 200.0, 0.0, 0.0, rings=1, elevation_min_deg=0.0, elevation_max_deg=0.0, columns=3600
+    )
+    with RayCaster(wall) as caster:
+        sim = SweepSimulator(wall, caster, sensor, Mount(np.zeros(3), np.eye(3)))
+        traj = _straight([0, 0, 0], [0, 0, 0], 1.0)
+        pts = sim.simulate(traj, 0.0, sensor.sweep(0), np.random.default_rng(0), mover)
+        without = sim.simulate(traj, 0.0, sensor.sweep(0), np.random.default_rng(0))
+    ahead = pts[np.abs(pts["y"] / pts["x"]) < 0.9 / 5.0]
+    np.testing.assert_allclose(ahead["x"], 5.0, atol=1e-4)
+    assert np.all(without["x"][np.abs(without["y"] / without["x"]) < 0.9 / 5.0] > 19.9)
+    assert len(pts) == len(without)  # rays that hit the wall hit the mover instead: no return gained or lost

@@ -47,22 +47,34 @@ class SweepSimulator:
         origin = p + rotate(q, self._mount.translation)
         return origin, rotate(q, directions @ self._mount.rotation.T)
 
-    def simulate(self, trajectory: Trajectory, t_start: float, sweep: Sweep, rng: np.random.Generator) -> np.ndarray:
+    def simulate(
+        self, trajectory: Trajectory, t_start: float, sweep: Sweep, rng: np.random.Generator, movers: Mesh | None = None
+    ) -> np.ndarray:
         """Points (POINT_DTYPE, lidar frame) of ``sweep`` starting at ``t_start`` [s] on ``trajectory``;
-        rays with no return (miss, out of range, dropout) are left out."""
+        rays with no return (miss, out of range, dropout) are left out. ``movers`` are extra (moving)
+        objects frozen for this sweep."""
         origin, world_dir = self.rays(trajectory, t_start + sweep.dt, sweep.directions)
         dist, prim = self._caster.cast(origin, world_dir)
+        reflectivity, normals = self._reflectivity, self._normals
+        if movers is not None:
+            with RayCaster(movers, threads=1) as caster:
+                d_mov, p_mov = caster.cast(origin, world_dir)
+            closer = d_mov < dist
+            dist = np.where(closer, d_mov, dist)
+            prim = np.where(closer, p_mov + len(reflectivity), prim)
+            reflectivity = np.concatenate([reflectivity, movers.reflectivity])
+            normals = np.concatenate([normals, movers.face_normals()])
         s = self.sensor
         noise = rng.standard_normal(len(dist))
         keep = rng.random(len(dist)) >= s.dropout
         keep &= (dist >= s.min_range) & (dist <= s.max_range)
         r = dist[keep].astype(np.float64) + s.range_sigma * noise[keep]
         hit = prim[keep]
-        cos_inc = np.abs(np.sum(self._normals[hit] * world_dir[keep], axis=1))
+        cos_inc = np.abs(np.sum(normals[hit] * world_dir[keep], axis=1))
         out = np.empty(int(keep.sum()), dtype=POINT_DTYPE)
         xyz = sweep.directions[keep] * r[:, None]
         out["x"], out["y"], out["z"] = xyz[:, 0], xyz[:, 1], xyz[:, 2]
-        out["intensity"] = np.clip(255.0 * self._reflectivity[hit] * (0.3 + 0.7 * cos_inc), 0.0, 255.0)
+        out["intensity"] = np.clip(255.0 * reflectivity[hit] * (0.3 + 0.7 * cos_inc), 0.0, 255.0)
         out["ring"] = sweep.ring[keep]
         out["time"] = sweep.dt[keep]
         return out

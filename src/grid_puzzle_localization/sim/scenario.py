@@ -16,7 +16,7 @@ import os
 import shutil
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +29,7 @@ from grid_puzzle_localization.pcd import PcdStreamWriter
 from grid_puzzle_localization.sim.imu import ImuNoise, simulate_imu, true_motion
 from grid_puzzle_localization.sim.lidar import Mount, SweepSimulator
 from grid_puzzle_localization.sim.mapping import MAP_DTYPE, DriftBounds, VoxelMap, drifted, to_map
+from grid_puzzle_localization.sim.movers import Movers, make_movers
 from grid_puzzle_localization.sim.raycast import RayCaster
 from grid_puzzle_localization.sim.sensors import DEFAULT_SENSOR, get_sensor
 from grid_puzzle_localization.sim.trajectory import RATE, Trajectory, localization_trajectory, mapping_trajectory
@@ -53,6 +54,7 @@ class ScenarioConfig:
     map_leaf: float | None = None  # [m] voxel size of the prior map
     start_time: float = 1.7e9  # [s] bag time of the first sample
     threads: int = 2  # ray-casting threads (the output does not depend on it)
+    movers: int | None = None  # moving pedestrians/cars in the scans (not in the map); None: world default
     drift: DriftBounds = field(default_factory=DriftBounds)
     imu_noise: ImuNoise = field(default_factory=ImuNoise)
 
@@ -69,18 +71,9 @@ class ScenarioConfig:
             raise UserError(f"--seed must be a non-negative integer (got {self.seed})")
         if self.threads < 1:
             raise UserError(f"--threads must be at least 1 (got {self.threads})")
-        return ScenarioConfig(
-            self.world,
-            sensor,
-            self.seed,
-            self.scale,
-            self.duration,
-            leaf,
-            self.start_time,
-            self.threads,
-            self.drift,
-            self.imu_noise,
-        )
+        if self.movers is not None and self.movers < 0:
+            raise UserError(f"--movers must be a non-negative count (got {self.movers})")
+        return replace(self, sensor=sensor, map_leaf=leaf)
 
 
 @dataclass
@@ -115,7 +108,9 @@ def _write_tum(path: Path, t0: float, traj: Trajectory) -> None:
     np.savetxt(path, data, fmt=["%.6f"] + ["%.6f"] * 3 + ["%.9f"] * 4, header="timestamp tx ty tz qx qy qz qw")
 
 
-def _write_bag(path: Path, cfg: ScenarioConfig, sim: SweepSimulator, traj: Trajectory, mount: Mount, show: bool):
+def _write_bag(
+    path: Path, cfg: ScenarioConfig, sim: SweepSimulator, traj: Trajectory, mount: Mount, movers: Movers, show: bool
+):
     from grid_puzzle_localization.ros.bag_writer import BagNames, ScenarioBag
 
     sensor, t0 = sim.sensor, cfg.start_time
@@ -142,7 +137,9 @@ def _write_bag(path: Path, cfg: ScenarioConfig, sim: SweepSimulator, traj: Traje
         for k in range(n_sweeps):
             motion(k * samples_per_sweep, (k + 1) * samples_per_sweep)
             sweep = sensor.sweep(k)
-            cloud = sim.simulate(traj, k / sensor.rate, sweep, rng)
+            t_mid = (k + 0.5) / sensor.rate
+            frozen = movers.mesh_at(t_mid, traj.interpolate(np.array([t_mid]))[0][0, :2])
+            cloud = sim.simulate(traj, k / sensor.rate, sweep, rng, frozen)
             bag.write_points(t0 + k / sensor.rate, t0 + (k + 1) / sensor.rate, cloud)
             rays += len(sweep.dt)
             points += len(cloud)
@@ -173,7 +170,7 @@ def _write_map(path: Path, cfg: ScenarioConfig, sim: SweepSimulator, traj: Traje
     return n_sweeps, rays, points, count
 
 
-def _describe(cfg: ScenarioConfig, world, loc: Trajectory, mapping: Trajectory, mount: Mount) -> dict:
+def _describe(cfg: ScenarioConfig, world, loc: Trajectory, mapping: Trajectory, mount: Mount, movers: Movers) -> dict:
     sensor = get_sensor(cfg.sensor)
     params = asdict(cfg)
     params.pop("threads")
@@ -190,6 +187,7 @@ def _describe(cfg: ScenarioConfig, world, loc: Trajectory, mapping: Trajectory, 
             "length_m": round(loc.length(), 3),
             "start_time_s": float(cfg.start_time),
         },
+        "movers": {kind: movers.kinds.count(kind) for kind in sorted(set(movers.kinds))},
         "mapping_run": {"duration_s": float(mapping.duration), "length_m": round(mapping.length(), 3)},
         "frames": {"map": "map", "base": "base_link", "lidar": "lidar"},
         "topics": {"points": "points", "imu": "imu", "ground_truth": "ground_truth", "tf_static": "/tf_static"},
@@ -212,6 +210,7 @@ def generate(
     if cfg.duration is not None:
         loc = loc.truncated(cfg.duration)
     mapping = mapping_trajectory(world, loc, _rng(cfg.seed, 2))
+    movers = make_movers(world, cfg.scale, loc.duration, cfg.movers, _rng(cfg.seed, 7))
     mount = Mount(np.array(MOUNTS[cfg.world]), np.eye(3))
     tmp = out.parent / f".{out.name}.partial-{os.getpid()}"
     shutil.rmtree(tmp, ignore_errors=True)
@@ -220,11 +219,11 @@ def generate(
         with RayCaster(world.mesh, cfg.threads) as caster:
             sim = SweepSimulator(world.mesh, caster, get_sensor(cfg.sensor), mount)
             (tmp / "scenario.yaml").write_text(
-                yaml.safe_dump(_describe(cfg, world, loc, mapping, mount), sort_keys=False)
+                yaml.safe_dump(_describe(cfg, world, loc, mapping, mount, movers), sort_keys=False)
             )
             _write_tum(tmp / "ground_truth.tum", cfg.start_time, loc)
             start = time.perf_counter()
-            sweeps, rays, points = _write_bag(tmp / "scenario.bag", cfg, sim, loc, mount, progress)
+            sweeps, rays, points = _write_bag(tmp / "scenario.bag", cfg, sim, loc, mount, movers, progress)
             mid = time.perf_counter()
             map_sweeps, map_rays, map_in, map_points = _write_map(
                 tmp / "global_map.pcd", cfg, sim, mapping, mount, progress

@@ -272,13 +272,13 @@ def urban(seed: int, scale: float) -> World:
             _tree(b, place, ground, x, y, rng)
     for (x, y), u, hw in _along_edges(graph, 7.0, lambda hw: hw - 1.2, rng):
         if hw >= 7.0 and rng.random() < 0.5:
-            _car(b, ground, x, y, float(np.arctan2(u[1], u[0])), rng)
+            car(b, ground, x, y, float(np.arctan2(u[1], u[0])), rng.uniform(0.15, 0.9))
     return World("urban", b.build(), ground, graph, extent)
 
 
-def _car(b: MeshBuilder, ground: Ground, x: float, y: float, yaw: float, rng: np.random.Generator) -> None:
+def car(b: MeshBuilder, ground: Ground, x: float, y: float, yaw: float, refl: float) -> None:
+    """A car (body and cabin boxes, 4.4 m x 1.8 m x 1.5 m) on the terrain at (x, y) heading ``yaw`` [rad]."""
     z = float(ground.height(np.array(x), np.array(y)))
-    refl = rng.uniform(0.15, 0.9)
     b.add(meshes.box(x - 2.2, y - 0.9, x + 2.2, y + 0.9, z + 0.25, z + 1.0, yaw), refl)
     c, s = np.cos(yaw), np.sin(yaw)
     cx, cy = x - 0.3 * c, y - 0.3 * s
