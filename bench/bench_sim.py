@@ -88,7 +88,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--duration", type=float, default=20.0, help="simulated seconds per scenario")
+    parser.add_argument("--duration", type=float, default=10.0, help="simulated seconds per scenario")
     args = parser.parse_args()
     out = {"threads": args.threads, "repeats": args.repeats}
     out.update(_raycast(args.threads, args.repeats, sweeps=30))
