@@ -95,7 +95,12 @@ def main() -> None:
     out["courtyard_livox"] = _scenario("courtyard", args.duration, args.threads)
     out["urban_hdl32"] = _scenario("urban", args.duration, args.threads)
     out["peak_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
-    out["hardware"] = {"cpu": _cpu_model(), "cores": os.cpu_count(), "python": platform.python_version()}
+    out["hardware"] = {
+        "cpu": _cpu_model(),
+        "cores": os.cpu_count(),
+        "load_average_1min_at_end": round(os.getloadavg()[0], 2),  # the CPU may be shared
+        "python": platform.python_version(),
+    }
     print(json.dumps(out, indent=2))
 
 

@@ -57,7 +57,7 @@ class SweepSimulator:
         dist, prim = self._caster.cast(origin, world_dir)
         reflectivity, normals = self._reflectivity, self._normals
         if movers is not None:
-            with RayCaster(movers, threads=1) as caster:
+            with RayCaster(movers, threads=self._caster.threads) as caster:
                 d_mov, p_mov = caster.cast(origin, world_dir)
             closer = d_mov < dist
             dist = np.where(closer, d_mov, dist)

@@ -230,6 +230,7 @@ def generate(
             )
             end = time.perf_counter()
         for name in FILES:
+            os.chmod(tmp / name, 0o644)  # temporary files are created private
             with open(tmp / name, "rb") as f:
                 os.fsync(f.fileno())
         if out.exists():

@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
+from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 from scipy.spatial.transform import Rotation
 
 from grid_puzzle_localization.sim.layout import PathGraph
@@ -229,8 +229,7 @@ def make_trajectory(
     s = np.append(s, total) if total - s[-1] > 1e-9 else s
     kappa = np.interp(s, s_geom, kappa_geom)
     # Curvature limits must hold before an arc starts: take the max curvature within +-1 m.
-    k = max(1, int(1.0 / prof.speed_step))
-    kappa = np.max(np.stack([np.roll(kappa, j) for j in range(-k, k + 1)]), axis=0)
+    kappa = maximum_filter1d(kappa, 2 * max(1, int(1.0 / prof.speed_step)) + 1, mode="nearest")
     stop_at = corner_s[rng.random(len(corner_s)) < prof.stop_prob] - prof.stop_backoff
     stop_at = stop_at[(stop_at > 0) & (stop_at < total)]
     stops = np.unique(np.searchsorted(s, stop_at))
