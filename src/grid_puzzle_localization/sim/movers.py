@@ -1,14 +1,14 @@
 """Moving objects (pedestrians, cars) that appear in the localization scans but not in the prior map.
 
 Each mover follows its own random route over the path graph with a walking or driving profile
-(pedestrians 1.2 m/s on the left of walkways, cars 6 m/s in the right lane with stops). For a sweep
+(pedestrians 1.2 m/s on the left, cars 6 m/s in the right lane with stops). For a sweep
 the movers are frozen at the sweep's middle time (they move at most 0.6 m during a 0.1 s sweep) and
 meshed; movers within ``CLEARANCE`` of the sensor are left out so the sensor is never inside one.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -19,6 +19,8 @@ from grid_puzzle_localization.sim.worlds import Ground, World, car
 
 PEDESTRIAN = MotionProfile(0.0, 1.2, 1.0, -0.8, 0.8, 1.0, 0.6, 0.1, (1.0, 5.0), 0.0, 0.1, 0.25)
 CAR = MotionProfile(0.0, 6.0, 9.0, 2.5, 1.5, 2.5, 2.0, 0.3, (3.0, 10.0), 8.0, 0.25, 0.2)
+# Pedestrians keep left: beside the walkway centre in the courtyard, on the sidewalk of narrow streets.
+PEDESTRIAN_LANE = {"courtyard": -0.8, "urban": -6.0}  # [m] right of the centre line
 CLEARANCE = {"pedestrian": 1.0, "car": 4.0}  # [m] horizontal, from the sensor
 DEFAULT_COUNT = {"courtyard": {"pedestrian": 12}, "urban": {"car": 12, "pedestrian": 8}}  # at scale 1
 
@@ -62,7 +64,7 @@ def make_movers(world: World, scale: float, duration: float, count: int | None, 
     kinds = [kinds[i % total] for i in range(wanted)]
     trajectories = []
     for kind in kinds:
-        prof = CAR if kind == "car" else PEDESTRIAN
+        prof = CAR if kind == "car" else replace(PEDESTRIAN, lane_offset=PEDESTRIAN_LANE[world.name])
         length = prof.speed_avg * duration + 20.0
         route = plan_route(world.graph, length, rng)
         trajectories.append(make_trajectory(world.graph, world.ground, route, prof, length, rng))
