@@ -61,7 +61,7 @@ def make_movers(world: World, scale: float, duration: float, count: int | None, 
     total = sum(mix.values())
     wanted = max(1, round(total * scale)) if count is None else count
     kinds = [k for k, n in mix.items() for _ in range(n)]
-    kinds = [kinds[i % total] for i in range(wanted)]
+    kinds = [kinds[(i * total) // wanted % total] for i in range(wanted)]  # keeps the mix's proportions
     trajectories = []
     for kind in kinds:
         prof = CAR if kind == "car" else replace(PEDESTRIAN, lane_offset=PEDESTRIAN_LANE[world.name])
