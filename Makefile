@@ -65,3 +65,7 @@ tsan-localizer: setup
 	cmake -S $(ROOT)/test/tsan_localizer -B $(ROOT)/.catkin_ws/build_tsan_localizer -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
 	cmake --build $(ROOT)/.catkin_ws/build_tsan_localizer -j2
 	cd $(ROOT) && TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(ROOT)/.catkin_ws/build_tsan_localizer/tsan_localizer_tests
+# --- scenario simulator (gpm simulate) ---
+.PHONY: bench-sim
+bench-sim: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_sim.py

@@ -14,6 +14,7 @@ from grid_puzzle_localization.errors import UserError
 COMMANDS: dict[str, tuple[str, str]] = {
     "tile": ("tiling.cli", "cut a global map PCD into grid puzzle tiles (or --verify a tiled map)"),
     "window": ("window_cli", "print the grid puzzle window (tiles to load) for a position, as JSON"),
+    "simulate": ("simulate", "generate a simulated LiDAR scenario: bag, ground truth, prior map"),
 }
 
 
