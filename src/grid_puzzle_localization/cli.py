@@ -11,7 +11,10 @@ from grid_puzzle_localization.errors import UserError
 
 # name -> (module, one-line help). Modules are imported lazily so `gpm tile` does not pay for
 # matplotlib or rospy.
-COMMANDS: dict[str, tuple[str, str]] = {}
+COMMANDS: dict[str, tuple[str, str]] = {
+    "blocks": ("blocks.blocks_command", "build keyframe-stitched block maps (block map paper, Algorithm 1)"),
+    "submaps": ("blocks.submaps_command", "cut a global map into fixed-size overlapping square submaps"),
+}
 
 
 def build_parser() -> argparse.ArgumentParser:
