@@ -6,12 +6,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import rosbag
+import rospy
+from geometry_msgs.msg import TransformStamped
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
+from tf2_msgs.msg import TFMessage
 
 from grid_puzzle_localization.blocks.store import read_block_index
 from grid_puzzle_localization.cli import main
 from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array
+from grid_puzzle_localization.ros.cloud_msg import array_to_cloud
 
 RADIUS = 6.05  # [m] a scan sees the world points within this planar distance of the robot
 EXTRINSIC = (0.5, 0.0, 1.2, 0.0, 0.0, np.sin(np.pi / 4), np.cos(np.pi / 4))  # sensor 90 deg yawed, raised
@@ -57,16 +62,32 @@ def keyframe_set(tmp_path: Path) -> tuple[Path, Path]:
         cloud["x"], cloud["y"], cloud["z"] = local.T
         write_pcd(scans / f"{k}.pcd", cloud)
         q = Rotation.from_matrix(robot[:3, :3]).as_quat()
-        lines.append(f"{0.1 * k!r} {robot[0, 3]!r} 0.0 0.0 {q[0]!r} {q[1]!r} {q[2]!r} {q[3]!r}")
+        lines.append(f"{0.5 * k!r} {robot[0, 3]!r} 0.0 0.0 {q[0]!r} {q[1]!r} {q[2]!r} {q[3]!r}")
     poses = tmp_path / "poses.tum"
     poses.write_text("\n".join(lines) + "\n")
     return scans, poses
 
 
+BUILD = ["--size", "10", "--keyframe-spacing", "2", "--voxel", "0.2"]
+
+
 def run_blocks(scans: Path, poses: Path, out: Path, *extra: str) -> int:
     args = ["blocks", str(out), "--keyframes", str(scans), "--poses", str(poses)]
-    args += ["--extrinsic", *map(repr, EXTRINSIC), "--size", "10", "--keyframe-spacing", "2", "--voxel", "0.2"]
-    return main([*args, *extra])
+    return main([*args, "--extrinsic", *map(repr, EXTRINSIC), *BUILD, *extra])
+
+
+def write_bag(scans: Path, path: Path) -> None:
+    """The keyframe set as a bag: clouds on `points` (frame lidar) stamped 0.5 k s, extrinsic on /tf_static."""
+    tf = TransformStamped()
+    tf.header.frame_id, tf.child_frame_id = "base_link", "lidar"
+    tf.transform.translation.x, tf.transform.translation.y, tf.transform.translation.z = EXTRINSIC[:3]
+    q = tf.transform.rotation
+    q.x, q.y, q.z, q.w = EXTRINSIC[3:]
+    with rosbag.Bag(str(path), "w") as bag:
+        bag.write("/tf_static", TFMessage(transforms=[tf]), rospy.Time(0))
+        for k in range(41):
+            stamp = rospy.Time.from_sec(0.5 * k)
+            bag.write("points", array_to_cloud(read_pcd(scans / f"{k}.pcd").points, "lidar", stamp), stamp)
 
 
 def test_blocks_hold_the_points_their_keyframes_saw(keyframe_set, tmp_path):
@@ -97,6 +118,18 @@ def test_blocks_hold_the_points_their_keyframes_saw(keyframe_set, tmp_path):
     centroids = np.loadtxt(out / "centroids.txt")
     np.testing.assert_array_equal(centroids[:, 0], np.arange(len(index.blocks)))
     np.testing.assert_array_equal(centroids[:, 1:], index.centroids())
+
+
+def test_bag_input_builds_the_same_blocks(keyframe_set, tmp_path):
+    scans, poses = keyframe_set
+    write_bag(scans, tmp_path / "scans.bag")
+    assert run_blocks(scans, poses, tmp_path / "from_pcd") == 0
+    bag_args = ["blocks", str(tmp_path / "from_bag"), "--bag", str(tmp_path / "scans.bag"), "--trajectory", str(poses)]
+    assert main([*bag_args, *BUILD]) == 0
+    a, b = read_block_index(tmp_path / "from_pcd"), read_block_index(tmp_path / "from_bag")
+    assert [e.points for e in a.blocks] == [e.points for e in b.blocks]
+    np.testing.assert_allclose(a.centroids(), b.centroids(), atol=1e-9)
+    np.testing.assert_allclose(b.params["extrinsic"], a.params["extrinsic"], atol=1e-12)  # read from /tf_static
 
 
 def test_existing_output_needs_overwrite(keyframe_set, tmp_path, capsys):

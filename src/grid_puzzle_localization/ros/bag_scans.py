@@ -11,16 +11,20 @@ from dataclasses import dataclass
 
 import numpy as np
 import rosbag
-from sensor_msgs import point_cloud2
 
 from grid_puzzle_localization.blocks.keyframes import Scan
 from grid_puzzle_localization.blocks.poses import Trajectory, pose_matrix
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.pcd import xyz_array
+from grid_puzzle_localization.ros.cloud_msg import cloud_to_array
 
 
 def _xyz(msg) -> np.ndarray:
-    # TODO(lead): switch to the shared numpy converter in ros/cloud_msg.py once it lands (provider branch).
-    return np.array(list(point_cloud2.read_points(msg, field_names=("x", "y", "z"), skip_nans=True)), dtype=np.float64)
+    """(N, 3) float64 sensor-frame points of a PointCloud2 (non-finite ones are dropped by the builder)."""
+    try:
+        return xyz_array(cloud_to_array(msg))
+    except (ValueError, KeyError) as err:
+        raise UserError(f"a cloud on the bag's scan topic cannot be read as x, y, z points: {err}") from err
 
 
 def _open(path: str | os.PathLike) -> rosbag.Bag:
