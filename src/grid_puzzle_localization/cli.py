@@ -14,6 +14,7 @@ from grid_puzzle_localization.errors import UserError
 COMMANDS: dict[str, tuple[str, str]] = {
     "blocks": ("blocks.blocks_command", "build keyframe-stitched block maps (block map paper, Algorithm 1)"),
     "submaps": ("blocks.submaps_command", "cut a global map into fixed-size overlapping square submaps"),
+    "storage": ("blocks.storage_command", "storage overhead of global map, tiles, blocks and submaps"),
 }
 
 
