@@ -6,12 +6,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-import numpy as np
-
-from grid_puzzle_localization.blocks.builder import BlockConfig, build_blocks
+from grid_puzzle_localization.blocks.builder import BlockConfig, build_blocks, union_points
 from grid_puzzle_localization.blocks.poses import parse_extrinsic, read_tum
 from grid_puzzle_localization.blocks.store import write_block_dir
-from grid_puzzle_localization.blocks.voxel import voxel_downsample
 from grid_puzzle_localization.errors import UserError
 
 KIND = "keyframe_blocks"
@@ -80,8 +77,7 @@ def run(args: argparse.Namespace) -> int:
     blocks, report = build_blocks(scans, config, extrinsic)
     if not blocks:
         raise UserError(f"no block was built from {source}: no keyframe with finite points lies inside the poses")
-    union = voxel_downsample(np.concatenate([b.points for b in blocks]), config.voxel)
-    map_points = len(union) if config.voxel > 0.0 else len(np.unique(union, axis=0))
+    map_points = union_points(blocks, config.voxel)
     params = {
         "block_size": config.block_size,
         "keyframe_spacing": config.keyframe_spacing,

@@ -111,6 +111,16 @@ class BlockBuilder:
             target.keyframes += candidate.keyframes
 
 
+def union_points(blocks: list[Block], voxel: float) -> int:
+    """Points of the map the blocks represent: their union, one point per voxel (distinct points when
+    ``voxel == 0``). Stored points over this is the blocks' overlap factor."""
+    if not blocks:
+        return 0
+    union = np.concatenate([b.points for b in blocks])
+    keys = np.floor(union / voxel).astype(np.int64) if voxel > 0.0 else union
+    return len(np.unique(keys, axis=0))
+
+
 def build_blocks(
     scans: Iterable[Scan], config: BlockConfig, extrinsic: np.ndarray | None = None
 ) -> tuple[list[Block], BuildReport]:
