@@ -27,7 +27,21 @@ def voxel_downsample(points: np.ndarray, voxel: float) -> np.ndarray:
     if voxel == 0.0 or len(points) == 0:
         return points
     keys = np.floor(points / voxel).astype(np.int64)
-    _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    linear = _linear(keys)
+    _, inverse, counts = np.unique(
+        linear, return_inverse=True, return_counts=True, axis=0 if linear.ndim == 2 else None
+    )
     inverse = inverse.reshape(-1)
     sums = np.stack([np.bincount(inverse, weights=points[:, k], minlength=len(counts)) for k in range(3)], axis=1)
     return sums / counts[:, None]
+
+
+def _linear(keys: np.ndarray) -> np.ndarray:
+    """One int64 per voxel index row, ordered like the rows (x most significant): sorting 1-D keys is
+    several times faster than sorting rows. Falls back to the rows when the extent does not fit."""
+    low = keys.min(axis=0)
+    extent = keys.max(axis=0) - low + 1
+    if float(extent[0]) * float(extent[1]) * float(extent[2]) >= 2.0**62:
+        return keys  # np.unique on rows: same order, slower
+    shifted = keys - low
+    return (shifted[:, 0] * extent[1] + shifted[:, 1]) * extent[2] + shifted[:, 2]
