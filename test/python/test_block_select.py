@@ -1,11 +1,14 @@
 """Block map server logic without ROS: nearest-block selection against brute force, and the block cache
 (merged clouds, duplicate removal, memory bound)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from grid_puzzle_localization.blocks.block_cache import BlockCache
 from grid_puzzle_localization.blocks.select import BlockSelector
+from grid_puzzle_localization.blocks.server_config import BlockMapServerConfig
 from grid_puzzle_localization.blocks.store import read_block_index, write_block_dir
 from grid_puzzle_localization.errors import UserError
 
@@ -71,3 +74,20 @@ def test_cache_keeps_only_selection_plus_cache(block_dir):
     assert cache.loads == 5
     cache.merged((0, 1))
     assert cache.loads == 7 and len(cache) == 3
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"block_dir": ""}, "block_dir is required"),
+        ({"num_blocks": 0}, "num_blocks"),
+        ({"cache_blocks": -1}, "cache_blocks"),
+        ({"pose_type": "tf"}, "pose_type"),
+        ({"initial_pose": (1.0, 2.0, 3.0)}, "initial_pose"),
+        ({"initial_pose": (1.0, 2.0, float("nan"), 0.0, 0.0, 0.0)}, "initial_pose"),
+    ],
+)
+def test_server_config_errors_name_the_parameter(changes, message):
+    config = dataclasses.replace(BlockMapServerConfig(block_dir="/maps/blocks"), **changes)
+    with pytest.raises(UserError, match=message):
+        config.checked()

@@ -24,6 +24,7 @@ from grid_puzzle_localization.ros.cloud_msg import cloud_to_array
 
 NUM_BLOCKS = 2
 TIMEOUT = 20.0  # [s] for any one expected message
+INITIAL_POSE = [47.0, 31.0, 0.5, 0.0, 0.0, 1.0]  # [x y z roll pitch yaw]: blocks served before any pose
 
 
 def make_blocks(directory: str) -> tuple[np.ndarray, list[np.ndarray]]:
@@ -53,7 +54,7 @@ class BlockMapServerTest(unittest.TestCase):
         )
         uuid = roslaunch.rlutil.get_or_generate_uuid(None, False)
         self.launch = roslaunch.parent.ROSLaunchParent(
-            uuid, [(launch_file, [f"block_dir:={self.block_dir}", "output:=log"])]
+            uuid, [(launch_file, [f"block_dir:={self.block_dir}", f"initial_pose:={INITIAL_POSE}", "output:=log"])]
         )
         self.launch.start()
         self.statuses, self.clouds_received = {}, {}
@@ -84,6 +85,11 @@ class BlockMapServerTest(unittest.TestCase):
         msg.pose.pose.orientation.w = 1.0
         self.odom.publish(msg)
 
+    def assert_cloud_holds(self, cloud: PointCloud2, blocks: tuple) -> None:
+        self.assertEqual(cloud.header.frame_id, "map")
+        union = np.concatenate([self.clouds[i] for i in blocks])
+        np.testing.assert_array_equal(xyz_rows(cloud_to_array(cloud)), np.unique(union.astype(np.float32), axis=0))
+
     def test_selection_cloud_and_query_match_brute_force(self):
         rospy.wait_for_service("block_map_server/query_blocks", timeout=TIMEOUT)
         while self.odom.get_num_connections() == 0 and not rospy.is_shutdown():
@@ -92,7 +98,14 @@ class BlockMapServerTest(unittest.TestCase):
         # A path through the grid (many switches) with some repeated positions (no switch).
         path = np.concatenate([np.linspace([-10, -10, 0], [100, 70, 0], 25), np.repeat([[45.0, 30.0, 0.0]], 3, axis=0)])
         path[:, 2] = rng.uniform(-1, 1, len(path))
-        previous, switches = None, 0
+        # The blocks around ~initial_pose are published at startup, before any pose.
+        deadline = rospy.get_time() + TIMEOUT
+        while not self.clouds_received and rospy.get_time() < deadline:
+            rospy.sleep(0.02)
+        self.assertEqual(len(self.clouds_received), 1, "expected exactly the startup map_cloud")
+        previous = tuple(sorted(self.brute_force(np.array(INITIAL_POSE[:3])).tolist()))
+        self.assert_cloud_holds(next(iter(self.clouds_received.values())), previous)
+        switches = 1
         for k, position in enumerate(path):
             stamp = rospy.Time(1000 + k)
             self.send_pose(position, stamp)
@@ -101,12 +114,7 @@ class BlockMapServerTest(unittest.TestCase):
             self.assertEqual(tuple(status.selected_ids), expected)
             if expected != previous:
                 switches += 1
-                cloud = self.wait_for(self.clouds_received, stamp)
-                self.assertEqual(cloud.header.frame_id, "map")
-                union = np.concatenate([self.clouds[i] for i in expected])
-                np.testing.assert_array_equal(
-                    xyz_rows(cloud_to_array(cloud)), np.unique(union.astype(np.float32), axis=0)
-                )
+                self.assert_cloud_holds(self.wait_for(self.clouds_received, stamp), expected)
             else:
                 self.assertNotIn(stamp, self.clouds_received)
             self.assertEqual(status.switch_count, switches)

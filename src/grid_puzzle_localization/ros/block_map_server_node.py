@@ -1,7 +1,8 @@
 """block_map_server: publishes the nearest blocks of a block map as a latched `map_cloud`.
 
 Subscribes: `odom` (nav_msgs/Odometry) or `pose` (geometry_msgs/PoseWithCovarianceStamped), per
-~pose_type, in ~map_frame. Publishes: `map_cloud` (sensor_msgs/PointCloud2, latched, ~map_frame),
+~pose_type, and `initialpose` (PoseWithCovarianceStamped), all in ~map_frame; ~initial_pose selects
+the first blocks at startup. Publishes: `map_cloud` (sensor_msgs/PointCloud2, latched, ~map_frame),
 `~status` (BlockMapStatus). Service: `~query_blocks` (QueryBlocks). Selection, loading and merging are
 the pure modules in grid_puzzle_localization.blocks; loads run on a worker thread that only ever
 handles the latest pose.
@@ -35,7 +36,8 @@ def read_config() -> BlockMapServerConfig:
     """The node's private parameters, each defaulting to the dataclass field default."""
     values = {}
     for f in dataclasses.fields(BlockMapServerConfig):
-        values[f.name] = type(f.default)(rospy.get_param(f"~{f.name}", f.default))
+        value = rospy.get_param(f"~{f.name}", f.default)
+        values[f.name] = tuple(float(v) for v in value) if isinstance(f.default, tuple) else type(f.default)(value)
     return BlockMapServerConfig(**values).checked()
 
 
@@ -61,6 +63,9 @@ class BlockMapServer:
             self._sub = rospy.Subscriber("odom", Odometry, self._on_pose, queue_size=1)
         else:
             self._sub = rospy.Subscriber("pose", PoseWithCovarianceStamped, self._on_pose, queue_size=1)
+        self._initial_sub = rospy.Subscriber("initialpose", PoseWithCovarianceStamped, self._on_pose, queue_size=1)
+        if config.initial_pose:
+            self._submit(np.array(config.initial_pose[:3]), rospy.Time.now())
         rospy.loginfo(
             f"block_map_server: {len(self.ids)} blocks ({index.kind}) from {config.block_dir}, "
             f"selecting {self.selector.k} nearest"
@@ -78,8 +83,11 @@ class BlockMapServer:
         if not np.all(np.isfinite(position)):
             rospy.logwarn_throttle(10.0, f"block_map_server: ignoring non-finite pose {position.tolist()}")
             return
+        self._submit(position, msg.header.stamp)
+
+    def _submit(self, position: np.ndarray, stamp: rospy.Time) -> None:
         with self._wake:
-            self._latest = (position, msg.header.stamp)
+            self._latest = (position, stamp)
             self._wake.notify()
 
     def _on_query(self, request) -> QueryBlocksResponse:
