@@ -31,3 +31,8 @@ demo: build
 
 clean:
 	rm -rf $(ROOT)/.catkin_ws $(ROOT)/test_results
+
+# ---------------------------------------------------------------- block maps (issue 8)
+.PHONY: bench-blocks
+bench-blocks: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_blocks.py --repeats 3
