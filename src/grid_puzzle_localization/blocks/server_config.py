@@ -30,9 +30,7 @@ class BlockMapServerConfig:
         if self.cache_blocks < 0:
             raise UserError(f"parameter ~cache_blocks must be >= 0 (got {self.cache_blocks})")
         if len(self.initial_pose) not in (0, 6) or not all(math.isfinite(v) for v in self.initial_pose):
-            raise UserError(
-                f"parameter ~initial_pose must be [] or [x y z roll pitch yaw] (got {self.initial_pose})"
-            )
+            raise UserError(f"parameter ~initial_pose must be [] or [x y z roll pitch yaw] (got {self.initial_pose})")
         if self.pose_type not in POSE_TYPES:
             raise UserError(f"parameter ~pose_type must be one of {POSE_TYPES} (got '{self.pose_type}')")
         return self
