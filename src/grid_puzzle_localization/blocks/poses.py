@@ -7,6 +7,7 @@ the map frame.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from dataclasses import dataclass
@@ -52,6 +53,10 @@ class Trajectory:
         pose[:3, 3] = self.translations[index]
         return pose
 
+    @functools.cached_property
+    def _slerp(self) -> Slerp:
+        return Slerp(self.stamps, self.rotations)
+
     def interpolate(self, stamps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Poses ``(M, 4, 4)`` at ``stamps`` (linear in translation, slerp in rotation) and a mask of
         the stamps that lie inside the trajectory's time span (poses outside it are not extrapolated)."""
@@ -64,7 +69,7 @@ class Trajectory:
             t = stamps[inside]
             for k in range(3):
                 poses[inside, k, 3] = np.interp(t, self.stamps, self.translations[:, k])
-            poses[inside, :3, :3] = Slerp(self.stamps, self.rotations)(t).as_matrix()
+            poses[inside, :3, :3] = self._slerp(t).as_matrix()
         return poses, inside
 
 
