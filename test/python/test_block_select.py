@@ -91,3 +91,17 @@ def test_server_config_errors_name_the_parameter(changes, message):
     config = dataclasses.replace(BlockMapServerConfig(block_dir="/maps/blocks"), **changes)
     with pytest.raises(UserError, match=message):
         config.checked()
+
+
+def test_failed_write_keeps_the_old_directory(block_dir, tmp_path):
+    index, _ = block_dir
+    before = sorted(p.name for p in index.directory.iterdir())
+
+    def blocks():
+        yield np.zeros((3, 3)), np.zeros(3), {}
+        raise RuntimeError("disk full")
+
+    with pytest.raises(RuntimeError):
+        write_block_dir(index.directory, blocks(), "keyframe_blocks", {}, 0, overwrite=True)
+    assert sorted(p.name for p in index.directory.iterdir()) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b"]  # no temporaries left

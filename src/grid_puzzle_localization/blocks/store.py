@@ -7,8 +7,8 @@ Layout (all coordinates in the map frame, metres)::
     index.yaml           format, kind, build parameters, map_points, and per block: id, file,
                          points, bytes (file size), centroid, bounds {min, max} and kind-specific keys
 
-The directory is written under a temporary name beside the target and renamed into place, so a
-reader sees either the old directory or the complete new one.
+The directory is written under a temporary name beside the target and renamed into place, so no
+reader ever sees a partly written directory, and a failed write leaves the old one untouched.
 """
 
 from __future__ import annotations
