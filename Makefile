@@ -69,3 +69,7 @@ tsan-localizer: setup
 .PHONY: bench-sim
 bench-sim: build
 	@$(SETUP) python3 $(ROOT)/bench/bench_sim.py
+# ---------------------------------------------------------------- block maps (issue 8)
+.PHONY: bench-blocks
+bench-blocks: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_blocks.py --repeats 3
