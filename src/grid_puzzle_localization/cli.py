@@ -11,7 +11,9 @@ from grid_puzzle_localization.errors import UserError
 
 # name -> (module, one-line help). Modules are imported lazily so `gpm tile` does not pay for
 # matplotlib or rospy.
-COMMANDS: dict[str, tuple[str, str]] = {}
+COMMANDS: dict[str, tuple[str, str]] = {
+    "monitor": ("monitor.command", "Sample CPU (percent of one core) and memory of ROS nodes or PIDs."),
+}
 
 
 def build_parser() -> argparse.ArgumentParser:
