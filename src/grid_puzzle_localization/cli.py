@@ -13,6 +13,7 @@ from grid_puzzle_localization.errors import UserError
 # matplotlib or rospy.
 COMMANDS: dict[str, tuple[str, str]] = {
     "monitor": ("monitor.command", "Sample CPU (percent of one core) and memory of ROS nodes or PIDs."),
+    "experiment": ("experiment.command", "Run the localizer per map mode on a bag, monitor it, and report."),
     "report": ("report.command", "Rebuild summary.json, report.md and plots of an experiment directory."),
 }
 
