@@ -27,7 +27,7 @@ format: setup
 	$(ROOT)/.venv/bin/ruff format $(PY_SOURCES)
 
 demo: build
-	@echo "make demo: not yet implemented (the experiment runner lands with issue 6)"
+	@$(SETUP) bash $(ROOT)/tools/demo.sh
 
 clean:
 	rm -rf $(ROOT)/.catkin_ws $(ROOT)/test_results

@@ -15,7 +15,7 @@ from nav_msgs.msg import Odometry
 from grid_puzzle_localization.cli import main
 from grid_puzzle_localization.evaluation.trajectory import read_tum
 from grid_puzzle_localization.experiment.processes import ManagedProcess, free_port, wait_for
-from grid_puzzle_localization.experiment.ros_stack import RosCore, rosbag_play, rosrun
+from grid_puzzle_localization.experiment.ros_stack import RosCore, rosbag_play, run_node
 from grid_puzzle_localization.ros.node_pids import node_pid
 
 # Prints "ready" once its signal handlers are set; ignores the signals named in argv.
@@ -133,7 +133,7 @@ def write_odometry_bag(path, n: int = 40) -> np.ndarray:
 def test_recorder_writes_the_played_odometry_as_tum(tmp_path, roscore, monkeypatch, capsys):
     expected = write_odometry_bag(tmp_path / "odom.bag")
     out = tmp_path / "traj.tum"
-    recorder = rosrun(
+    recorder = run_node(
         "recorder",
         "trajectory_recorder",
         [f"_output:={out}", "_initial_pose:=[1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 1.0]"],

@@ -8,7 +8,9 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import rosgraph
+import roslib.packages
 
+from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.experiment.processes import ManagedProcess, free_port, wait_for
 
 CALLER_ID = "/gpm_experiment"
@@ -88,11 +90,15 @@ def roslaunch(
     return ManagedProcess("roslaunch", argv, env, log_path)
 
 
-def rosrun(
+def run_node(
     name: str, executable: str, argv: Sequence[str], env: Mapping[str, str], log_path: str | os.PathLike
 ) -> ManagedProcess:
-    """``rosrun grid_puzzle_localization <executable> argv...`` (rosrun execs, so the PID is the node's)."""
-    return ManagedProcess(name, ["rosrun", PACKAGE, executable, *argv], env, log_path)
+    """A node executable of this package, found as roslaunch finds it (the devel-space relay first), so
+    the PID is the node's. (rosrun would stop to ask when the package holds its own workspace.)"""
+    matches = roslib.packages.find_node(PACKAGE, executable)
+    if not matches:
+        raise UserError(f"cannot find the node executable {executable} of {PACKAGE}; build with `make build`")
+    return ManagedProcess(name, [matches[0], *argv], env, log_path)
 
 
 def rosbag_play(

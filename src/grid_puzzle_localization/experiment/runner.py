@@ -17,7 +17,7 @@ from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation.trajectory import read_tum
 from grid_puzzle_localization.experiment.config import ExperimentConfig
 from grid_puzzle_localization.experiment.processes import ManagedProcess, wait_for
-from grid_puzzle_localization.experiment.ros_stack import RosCore, rosbag_play, roslaunch, rosrun
+from grid_puzzle_localization.experiment.ros_stack import RosCore, rosbag_play, roslaunch, run_node
 from grid_puzzle_localization.monitor.log import write_csv
 from grid_puzzle_localization.monitor.sampler import Monitor
 from grid_puzzle_localization.monitor.stats import summarize
@@ -103,7 +103,7 @@ def run_mode(cfg: ExperimentConfig, mode: str, tiles: Path | None, initial_pose:
         wait_for(lambda: core.subscribers("/points"), cfg.startup_timeout_s, "a subscriber of /points", launch)
         x, y, z, roll, pitch, yaw = initial_pose
         pose = [x, y, z, *map(float, Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_quat())]
-        recorder = rosrun(
+        recorder = run_node(
             "trajectory_recorder",
             "trajectory_recorder",
             [
