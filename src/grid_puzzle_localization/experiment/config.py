@@ -54,6 +54,7 @@ class ExperimentConfig:
     ndt_threads: int = 0  # 0 = all cores
     initial_pose: list[float] | None = None  # x y z roll pitch yaw [m, rad]; None: first ground-truth pose
     roles: NodeRoles = field(default_factory=NodeRoles)
+    launch_file: str = "localization.launch"  # of this package, or an absolute path
     scenario_name: str = "custom"
 
     def check(self) -> None:

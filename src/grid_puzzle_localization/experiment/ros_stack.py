@@ -83,9 +83,10 @@ class RosCore:
 def roslaunch(
     launch_file: str, args: Mapping[str, object], env: Mapping[str, str], log_path: str | os.PathLike
 ) -> ManagedProcess:
-    """``roslaunch grid_puzzle_localization <launch_file> name:=value ...`` against the master in
-    ``env``; nodes get 5 s to exit on SIGINT, then 2 s on SIGTERM."""
-    argv = ["roslaunch", "--sigint-timeout", "5", "--sigterm-timeout", "2", PACKAGE, launch_file]
+    """``roslaunch grid_puzzle_localization <launch_file> name:=value ...`` (or an absolute launch file
+    path) against the master in ``env``; nodes get 5 s to exit on SIGINT, then 2 s on SIGTERM."""
+    where = [launch_file] if os.path.isabs(launch_file) else [PACKAGE, launch_file]
+    argv = ["roslaunch", "--sigint-timeout", "5", "--sigterm-timeout", "2", *where]
     argv += [f"{k}:={v}" for k, v in args.items()]
     return ManagedProcess("roslaunch", argv, env, log_path)
 

@@ -36,6 +36,7 @@ from grid_puzzle_localization.ros.node_pids import node_target
 @dataclass
 class ModeOutcome:
     mode: str
+    master_uri: str
     roles: dict[str, str]
     processes: list[str]
     killed_pids: list[int]  # needed SIGKILL at shutdown (should be empty)
@@ -95,7 +96,7 @@ def run_mode(cfg: ExperimentConfig, mode: str, tiles: Path | None, initial_pose:
         core = RosCore(out / "logs", cfg.startup_timeout_s)
         started.append(core.process)
         launch = roslaunch(
-            "localization.launch", launch_args(cfg, mode, tiles, initial_pose), core.env, out / "logs" / "roslaunch.log"
+            cfg.launch_file, launch_args(cfg, mode, tiles, initial_pose), core.env, out / "logs" / "roslaunch.log"
         )
         started.append(launch)
         wanted = set(roles.values())
@@ -146,7 +147,7 @@ def run_mode(cfg: ExperimentConfig, mode: str, tiles: Path | None, initial_pose:
         raise UserError(f"mode {mode}: processes {stray} survived SIGKILL; stop them by hand")
     if not (out / TRAJECTORY).is_file() or len(read_tum(out / TRAJECTORY)) == 0:
         raise UserError(f"mode {mode}: the localizer published no odometry; see {out / 'logs' / 'roslaunch.log'}")
-    return ModeOutcome(mode, roles, processes, killed, stray)
+    return ModeOutcome(mode, core.master_uri, roles, processes, killed, stray)
 
 
 def run_experiment(cfg: ExperimentConfig, tiles: Path | None, storage: dict | None) -> dict:
