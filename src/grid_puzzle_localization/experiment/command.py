@@ -8,7 +8,9 @@ import argparse
 from pathlib import Path
 
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.evaluation.storage import storage_figures
 from grid_puzzle_localization.experiment.config import MODES, PRESETS, ExperimentConfig, NodeRoles, WindowPreset
+from grid_puzzle_localization.experiment.maps import ensure_tiles
 from grid_puzzle_localization.experiment.runner import run_experiment
 from grid_puzzle_localization.experiment.scenario import read_scenario
 from grid_puzzle_localization.report.markdown import comparison_table
@@ -75,9 +77,10 @@ def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
 def run(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     cfg.check()
-    if "grid_puzzle" in cfg.modes and cfg.tiles is None:
-        raise UserError("grid_puzzle mode needs --tiles DIR (cut the map with `gpm tile`)")
-    summary = run_experiment(cfg, cfg.tiles, storage=None)
+    tiles = cfg.tiles
+    if tiles is None:
+        tiles = ensure_tiles(cfg.global_map, cfg.out_dir / f"tiles_s{cfg.window.grid_size_m:g}", cfg.window.grid_size_m)
+    summary = run_experiment(cfg, tiles, storage_figures(cfg.global_map, tiles))
     print("\n".join(comparison_table(summary)))
     print(f"\nreport: {cfg.out_dir / 'report.md'}, plots: {cfg.out_dir / 'plots'}/")
     return 0
