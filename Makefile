@@ -31,3 +31,12 @@ demo: build
 
 clean:
 	rm -rf $(ROOT)/.catkin_ws $(ROOT)/test_results
+
+# ---------------------------------------------------------------- monitor and experiment (issue 6)
+.PHONY: bench-monitor experiment-paper
+
+bench-monitor: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_monitor.py
+
+experiment-paper: build
+	@$(SETUP) bash $(ROOT)/tools/experiment_paper.sh

@@ -22,7 +22,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bag", help="rosbag with points, imu and /tf_static (overrides the scenario's)")
     parser.add_argument("--map", help="global map PCD (overrides the scenario's)")
     parser.add_argument("--ground-truth", help="ground truth TUM file (optional)")
-    parser.add_argument("--tiles", help="tile directory from `gpm tile` (default: cut the map into OUT/tiles)")
+    parser.add_argument("--tiles", help="tile directory: reused if it holds the map tiles, else cut (OUT/tiles_s<S>)")
     parser.add_argument("--modes", nargs="+", default=["global", "grid_puzzle"], choices=MODES, help="modes to run")
     parser.add_argument(
         "--preset", default="demo", choices=sorted(PRESETS), help="window preset n, k, s (default demo)"
@@ -77,9 +77,8 @@ def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
 def run(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     cfg.check()
-    tiles = cfg.tiles
-    if tiles is None:
-        tiles = ensure_tiles(cfg.global_map, cfg.out_dir / f"tiles_s{cfg.window.grid_size_m:g}", cfg.window.grid_size_m)
+    tile_dir = cfg.tiles or cfg.out_dir / f"tiles_s{cfg.window.grid_size_m:g}"
+    tiles = ensure_tiles(cfg.global_map, tile_dir, cfg.window.grid_size_m)
     summary = run_experiment(cfg, tiles, storage_figures(cfg.global_map, tiles))
     print("\n".join(comparison_table(summary)))
     print(f"\nreport: {cfg.out_dir / 'report.md'}, plots: {cfg.out_dir / 'plots'}/")
