@@ -23,6 +23,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--map", help="global map PCD (overrides the scenario's)")
     parser.add_argument("--ground-truth", help="ground truth TUM file (optional)")
     parser.add_argument("--tiles", help="tile directory: reused if it holds the map tiles, else cut (OUT/tiles_s<S>)")
+    parser.add_argument("--blocks", help="block map directory from `gpm blocks` (block_map mode)")
     parser.add_argument("--modes", nargs="+", default=["global", "grid_puzzle"], choices=MODES, help="modes to run")
     parser.add_argument(
         "--preset", default="demo", choices=sorted(PRESETS), help="window preset n, k, s (default demo)"
@@ -37,9 +38,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--initial-pose", type=float, nargs=6, metavar=("X", "Y", "Z", "ROLL", "PITCH", "YAW"),
         help="start pose [m, rad] (default: the first ground-truth pose)",
     )  # fmt: skip
+    parser.add_argument("--settle", type=float, default=2.0, help="wait after start-up and after playback [s]")
     parser.add_argument("--max-time-diff", type=float, default=0.05, help="pose association tolerance [s]")
     parser.add_argument("--localizer-node", default=NodeRoles.localizer, help="node whose process runs the NDT")
-    parser.add_argument("--provider-node", default=NodeRoles.map_provider, help="node of the map provider")
+    parser.add_argument("--provider-node", default=NodeRoles.map_provider, help="node of the tile provider")
+    parser.add_argument("--block-server-node", default=NodeRoles.block_server, help="node of the block map server")
 
 
 def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
@@ -61,15 +64,17 @@ def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
         global_map=Path(global_map),
         ground_truth=Path(gt) if gt else None,
         tiles=Path(args.tiles) if args.tiles else None,
+        blocks=Path(args.blocks) if args.blocks else None,
         modes=list(dict.fromkeys(args.modes)),
         preset=args.preset,
         window=window,
         rate=args.rate,
         monitor_interval_s=args.interval,
         max_time_diff_s=args.max_time_diff,
+        settle_s=args.settle,
         ndt_threads=args.ndt_threads,
         initial_pose=list(args.initial_pose) if args.initial_pose else None,
-        roles=NodeRoles(args.localizer_node, args.provider_node),
+        roles=NodeRoles(args.localizer_node, args.provider_node, args.block_server_node),
         scenario_name=scenario.name if scenario else "custom",
     )
 

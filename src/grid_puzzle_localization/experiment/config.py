@@ -33,6 +33,7 @@ class NodeRoles:
 
     localizer: str = "/localizer_manager"
     map_provider: str = "/grid_puzzle_map_provider"
+    block_server: str = "/block_map_server"  # the block_map mode's map provider
     recorder: str = "/trajectory_recorder"
 
 
@@ -43,6 +44,7 @@ class ExperimentConfig:
     global_map: Path
     ground_truth: Path | None = None
     tiles: Path | None = None  # None: cut from global_map into out_dir/tiles
+    blocks: Path | None = None  # block map directory from `gpm blocks` (block_map mode)
     modes: list[str] = field(default_factory=lambda: ["global", "grid_puzzle"])
     preset: str = "demo"
     window: WindowPreset = PRESETS["demo"]
@@ -71,6 +73,8 @@ class ExperimentConfig:
         for label, path in (("bag", self.bag), ("global map", self.global_map), ("ground truth", self.ground_truth)):
             if path is not None and not Path(path).is_file():
                 raise UserError(f"{label} {path} does not exist")
+        if "block_map" in self.modes and self.blocks is None:
+            raise UserError("block_map mode needs --blocks DIR (block maps from `gpm blocks`)")
         if self.initial_pose is None and self.ground_truth is None:
             raise UserError("without ground truth, give the start pose: --initial-pose X Y Z ROLL PITCH YAW")
         if self.initial_pose is not None and len(self.initial_pose) != 6:

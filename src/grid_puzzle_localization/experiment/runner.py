@@ -64,13 +64,17 @@ def launch_args(cfg: ExperimentConfig, mode: str, tiles: Path | None, initial_po
     }
     if tiles is not None:
         args["tiles"] = tiles.resolve()
+    if mode == "block_map":
+        args["blocks"] = cfg.blocks.resolve()
     return args
 
 
 def mode_roles(cfg: ExperimentConfig, mode: str) -> dict[str, str]:
     roles = {"localizer": cfg.roles.localizer}
-    if mode != "global":
+    if mode == "grid_puzzle":
         roles["map_provider"] = cfg.roles.map_provider
+    elif mode == "block_map":
+        roles["map_provider"] = cfg.roles.block_server
     return roles
 
 
