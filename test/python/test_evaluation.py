@@ -6,7 +6,12 @@ from scipy.spatial.transform import Rotation
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation.association import associate
-from grid_puzzle_localization.evaluation.metrics import paired_errors, position_rmse, rotation_angle_deg
+from grid_puzzle_localization.evaluation.metrics import (
+    interpolated_errors,
+    paired_errors,
+    position_rmse,
+    rotation_angle_deg,
+)
 from grid_puzzle_localization.evaluation.resources import (
     compare_to_baseline,
     mode_resources,
@@ -227,3 +232,37 @@ def test_cross_check_with_evo():
         assert ape.get_statistic(evo_metrics.StatisticsType.rmse) == pytest.approx(stats.rmse, rel=1e-9)
         assert ape.get_statistic(evo_metrics.StatisticsType.max) == pytest.approx(stats.max, rel=1e-9)
         assert ape.get_statistic(evo_metrics.StatisticsType.median) == pytest.approx(stats.median, rel=1e-9)
+
+
+def test_dense_reference_pairs_each_sparse_pose_once():
+    # Ground truth at 100 Hz, estimate at 10 Hz on the same clock: 10 Hz pairs (evo's rule: iterate
+    # over the shorter trajectory), errors exactly the 2 cm offset.
+    t_gt = 100.0 + np.arange(1000) * 0.01
+    t_est = t_gt[::10]
+    errors = paired_errors(straight(t_gt), straight(t_est, offset=(0.0, 0.02, 0.0)), 0.005)
+    assert errors.translation.pairs == len(t_est)
+    assert errors.translation.max == pytest.approx(0.02, abs=1e-12)
+    np.testing.assert_array_equal(errors.t, t_est)
+
+
+def test_interpolated_reference_removes_the_stamp_offset():
+    # Estimate stamped 3 ms off the 100 Hz ground-truth grid while driving 5 m/s: nearest pairing
+    # sees 1.5 cm of error that is only timing; interpolation sees none. Yaw turns at 0.3 rad/s: slerp
+    # recovers the orientation at the estimate's time exactly.
+    t_gt = 100.0 + np.arange(1000) * 0.01
+    t_est = t_gt[5:-5:10] + 0.003
+
+    def turning(t):
+        yaw = 0.3 * (t - 100.0)
+        xyz = np.stack([5.0 * (t - 100.0), 0 * t, 0 * t], axis=1)
+        return make_trajectory(t, xyz, Rotation.from_euler("z", yaw).as_quat())
+
+    gt, est = turning(t_gt), turning(t_est)
+    assert paired_errors(gt, est, 0.005).translation.max == pytest.approx(5.0 * 0.003, abs=1e-9)
+    exact = interpolated_errors(gt, est, 0.005)
+    assert exact.translation.pairs == len(t_est)
+    assert exact.translation.max < 1e-9 and exact.rotation.max < 1e-6
+    # Poses beyond the reference's span are skipped, not extrapolated.
+    late = turning(np.array([t_gt[-1] + 0.002]))
+    with pytest.raises(UserError, match="same clock"):
+        interpolated_errors(gt, late, 0.005)

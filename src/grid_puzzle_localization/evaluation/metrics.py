@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation.association import associate
@@ -65,18 +66,48 @@ def rotation_angle_deg(q_ref: np.ndarray, q_est: np.ndarray) -> np.ndarray:
     return np.degrees(2.0 * np.arctan2(np.linalg.norm(d[:, :3], axis=1), np.abs(d[:, 3])))
 
 
+def _no_pairs(reference: Trajectory, estimate: Trajectory, max_diff: float) -> UserError:
+    span = lambda tr: f"{tr.t[0]:.3f}..{tr.t[-1]:.3f} s" if len(tr) else "empty"  # noqa: E731
+    return UserError(
+        f"no poses are within {max_diff} s of each other (reference {span(reference)}, estimate "
+        f"{span(estimate)}): check that both use the same clock"
+    )
+
+
 def paired_errors(reference: Trajectory, estimate: Trajectory, max_diff: float) -> PairedErrors:
-    """Associates ``estimate`` to ``reference`` in time (nearest within ``max_diff`` seconds) and
-    returns the per-pair errors; raises UserError when no pose pairs up."""
-    ia, ib = associate(reference.t, estimate.t, max_diff)
-    if ia.size == 0:
-        raise UserError(
-            f"no poses are within {max_diff} s of each other (reference {reference.t[:1]}..{reference.t[-1:]} s, "
-            f"estimate {estimate.t[:1]}..{estimate.t[-1:]} s): check that both use the same clock"
-        )
-    trans = np.linalg.norm(estimate.xyz[ib] - reference.xyz[ia], axis=1)
-    rot = rotation_angle_deg(reference.quat[ia], estimate.quat[ib])
-    return PairedErrors(reference.t[ia], trans, rot)
+    """Per-pair errors of ``estimate`` against ``reference``, paired by time as evo pairs them: each
+    pose of the shorter trajectory with the nearest pose of the other, within ``max_diff`` seconds.
+    Raises UserError when no pose pairs up."""
+    if len(estimate) <= len(reference):
+        ie, ir = associate(estimate.t, reference.t, max_diff)
+        t = estimate.t[ie]
+    else:
+        ir, ie = associate(reference.t, estimate.t, max_diff)
+        t = reference.t[ir]
+    if ir.size == 0:
+        raise _no_pairs(reference, estimate, max_diff)
+    trans = np.linalg.norm(estimate.xyz[ie] - reference.xyz[ir], axis=1)
+    rot = rotation_angle_deg(reference.quat[ir], estimate.quat[ie])
+    return PairedErrors(t, trans, rot)
+
+
+def interpolated_errors(reference: Trajectory, estimate: Trajectory, max_diff: float) -> PairedErrors:
+    """Errors of each ``estimate`` pose against ``reference`` interpolated at its time (linear in
+    position, slerp in rotation): for a dense ground truth (e.g. 100 Hz), so the pairing's time
+    offset adds no error. Poses outside the reference's time span, or farther than ``max_diff``
+    seconds from the nearest reference pose, are skipped."""
+    if len(reference) < 2:
+        raise UserError("interpolating a reference trajectory needs at least two poses")
+    ie, _ = associate(estimate.t, reference.t, max_diff)
+    t = estimate.t[ie]
+    inside = (t >= reference.t[0]) & (t <= reference.t[-1])
+    ie, t = ie[inside], t[inside]
+    if ie.size == 0:
+        raise _no_pairs(reference, estimate, max_diff)
+    xyz = np.stack([np.interp(t, reference.t, reference.xyz[:, k]) for k in range(3)], axis=1)
+    quat = Slerp(reference.t, Rotation.from_quat(reference.quat))(t).as_quat()
+    trans = np.linalg.norm(estimate.xyz[ie] - xyz, axis=1)
+    return PairedErrors(t, trans, rotation_angle_deg(quat, estimate.quat[ie]))
 
 
 def position_rmse(a: Trajectory, b: Trajectory, max_diff: float) -> float:

@@ -7,7 +7,7 @@ import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
-from grid_puzzle_localization.evaluation.metrics import paired_errors
+from grid_puzzle_localization.evaluation.metrics import PairedErrors, interpolated_errors, paired_errors
 from grid_puzzle_localization.evaluation.paper import PAPER_FIGURES
 from grid_puzzle_localization.evaluation.resources import compare_to_baseline, mode_resources
 from grid_puzzle_localization.evaluation.trajectory import Trajectory
@@ -27,8 +27,7 @@ class ModeRun:
     roles: Mapping[str, str]
 
 
-def _errors(reference: Trajectory, estimate: Trajectory, max_diff: float) -> dict:
-    errors = paired_errors(reference, estimate, max_diff)
+def _errors(errors: PairedErrors) -> dict:
     return {
         "translation_m": dataclasses.asdict(errors.translation),
         "rotation_deg": dataclasses.asdict(errors.rotation),
@@ -47,12 +46,13 @@ def summarize_experiment(
     paper's figures."""
     modes = {}
     for run in runs:
+        ape = None if ground_truth is None else interpolated_errors(ground_truth, run.trajectory, max_diff_s)
         modes[run.mode] = {
             "poses": len(run.trajectory),
             "duration_s": float(run.trajectory.t[-1] - run.trajectory.t[0]) if len(run.trajectory) else 0.0,
             "roles": dict(run.roles),
             "resources": mode_resources(run.mode, run.roles, run.monitor),
-            "ape": _errors(ground_truth, run.trajectory, max_diff_s) if ground_truth is not None else None,
+            "ape": None if ape is None else _errors(ape),
             "events": [dataclasses.asdict(e) for e in run.monitor.events],
         }
     by_mode = {run.mode: run for run in runs}
@@ -61,7 +61,7 @@ def summarize_experiment(
         base = by_mode[BASELINE_MODE].trajectory
         for run in runs:
             if run.mode != BASELINE_MODE:
-                between[f"{run.mode}_vs_{BASELINE_MODE}"] = _errors(base, run.trajectory, max_diff_s)
+                between[f"{run.mode}_vs_{BASELINE_MODE}"] = _errors(paired_errors(base, run.trajectory, max_diff_s))
     resources = {mode: m["resources"] for mode, m in modes.items()}
     return {
         "scenario": dict(scenario),

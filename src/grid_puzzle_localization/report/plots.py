@@ -10,7 +10,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from grid_puzzle_localization.atomic import atomic_write
-from grid_puzzle_localization.evaluation.metrics import paired_errors
+from grid_puzzle_localization.evaluation.metrics import interpolated_errors, paired_errors
 from grid_puzzle_localization.evaluation.trajectory import Trajectory
 from grid_puzzle_localization.monitor.log import MonitorLog
 from grid_puzzle_localization.report.markdown import MIB, MODE_TITLES
@@ -99,7 +99,7 @@ def plot_errors(
         for mode, traj in trajectories.items():
             if panel == baseline and mode == baseline:
                 continue
-            e = paired_errors(reference, traj, max_diff_s)
+            e = (interpolated_errors if panel == "ground truth" else paired_errors)(reference, traj, max_diff_s)
             ax.plot(e.t - t0, e.translation_m, color=COLORS.get(mode), lw=1.0, label=_title(mode))
         ax.set_title(f"position error against {'the ' + _title(baseline) + ' run' if panel == baseline else panel}")
         ax.set_xlabel("time since the first pose [s]")
