@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -78,6 +79,10 @@ def mode_roles(cfg: ExperimentConfig, mode: str) -> dict[str, str]:
     return roles
 
 
+def say(mode: str, text: str) -> None:
+    print(f"gpm experiment [{mode}]: {text}", file=sys.stderr, flush=True)
+
+
 def _stop_all(processes: list[ManagedProcess]) -> tuple[list[int], list[int]]:
     """Stops in reverse start order; returns (pids that needed SIGKILL, pids still alive)."""
     killed: list[int] = []
@@ -85,6 +90,35 @@ def _stop_all(processes: list[ManagedProcess]) -> tuple[list[int], list[int]]:
         killed += proc.stop()
     stray = [pid for proc in processes for pid in proc.alive_pids()]
     return killed, stray
+
+
+def start_recorder(cfg: ExperimentConfig, core: RosCore, out: Path, initial_pose: list[float]) -> ManagedProcess:
+    """The trajectory recorder node, subscribed to odom and publishing the initial pose (latched)."""
+    x, y, z, roll, pitch, yaw = initial_pose
+    pose = [x, y, z, *map(float, Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_quat())]
+    argv = [
+        f"__name:={cfg.roles.recorder.lstrip('/')}",
+        f"_output:={(out / TRAJECTORY).resolve()}",
+        f"_initial_pose:={pose}",
+    ]
+    recorder = run_node("trajectory_recorder", "trajectory_recorder", argv, core.env, out / "logs" / "recorder.log")
+    try:
+        recording = lambda: cfg.roles.recorder in core.subscribers("/odom")  # noqa: E731
+        wait_for(recording, cfg.startup_timeout_s, "the trajectory recorder", recorder)
+    except BaseException:
+        recorder.stop()
+        raise
+    return recorder
+
+
+def wait_for_playback(player: ManagedProcess, launch: ManagedProcess, bag: Path) -> None:
+    """Waits until rosbag play ends; raises UserError if it fails or roslaunch dies meanwhile."""
+    while player.wait(1.0) is None:
+        if not launch.running():
+            raise UserError(f"roslaunch exited during playback; see {launch.log_path}")
+        launch.remember_descendants()
+    if player.popen.returncode != 0:
+        raise UserError(f"rosbag play failed on {bag}; see {player.log_path}")
 
 
 def run_mode(cfg: ExperimentConfig, mode: str, tiles: Path | None, initial_pose: list[float]) -> ModeOutcome:
@@ -97,6 +131,7 @@ def run_mode(cfg: ExperimentConfig, mode: str, tiles: Path | None, initial_pose:
     started: list[ManagedProcess] = []
     monitor: Monitor | None = None
     try:
+        say(mode, "starting roscore and roslaunch")
         core = RosCore(out / "logs", cfg.startup_timeout_s)
         started.append(core.process)
         launch = roslaunch(
@@ -106,43 +141,21 @@ def run_mode(cfg: ExperimentConfig, mode: str, tiles: Path | None, initial_pose:
         wanted = set(roles.values())
         wait_for(lambda: wanted <= core.nodes(), cfg.startup_timeout_s, f"the nodes {sorted(wanted)}", launch)
         wait_for(lambda: core.subscribers("/points"), cfg.startup_timeout_s, "a subscriber of /points", launch)
-        x, y, z, roll, pitch, yaw = initial_pose
-        pose = [x, y, z, *map(float, Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_quat())]
-        recorder = run_node(
-            "trajectory_recorder",
-            "trajectory_recorder",
-            [
-                f"__name:={cfg.roles.recorder.lstrip('/')}",
-                f"_output:={(out / TRAJECTORY).resolve()}",
-                f"_initial_pose:={pose}",
-            ],
-            core.env,
-            out / "logs" / "trajectory_recorder.log",
-        )
-        started.append(recorder)
-        wait_for(
-            lambda: cfg.roles.recorder in core.subscribers("/odom"),
-            cfg.startup_timeout_s,
-            "the trajectory recorder",
-            recorder,
-        )
+        started.append(start_recorder(cfg, core, out, initial_pose))
         time.sleep(cfg.settle_s)
         launch.remember_descendants()
         processes = sorted(core.nodes() - {"/rosout", cfg.roles.recorder})
         monitor = Monitor([node_target(name, core.master_uri) for name in processes], cfg.monitor_interval_s)
         monitor.start()
-        player = rosbag_play(cfg.bag.resolve(), cfg.rate, core.env, out / "logs" / "rosbag_play.log")
-        started.append(player)
-        while player.wait(1.0) is None:
-            if not launch.running():
-                raise UserError(f"roslaunch exited during playback in mode {mode}; see {launch.log_path}")
-        if player.popen.returncode != 0:
-            raise UserError(f"rosbag play failed on {cfg.bag}; see {player.log_path}")
+        say(mode, f"monitoring {', '.join(processes)}; playing {cfg.bag.name} at {cfg.rate}x")
+        started.append(rosbag_play(cfg.bag.resolve(), cfg.rate, core.env, out / "logs" / "rosbag_play.log"))
+        wait_for_playback(started[-1], launch, cfg.bag)
         time.sleep(cfg.settle_s)  # the last scans are still being matched
         log = monitor.stop()
         monitor = None
         write_csv(out / MONITOR_CSV, log)
         write_json(out / MONITOR_JSON, summarize(log, cfg.monitor_interval_s))
+        say(mode, "playback done; shutting down")
     finally:
         if monitor is not None:
             monitor.stop()
