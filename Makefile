@@ -27,7 +27,7 @@ format: setup
 	$(ROOT)/.venv/bin/ruff format $(PY_SOURCES)
 
 demo: build
-	@echo "make demo: not yet implemented (the experiment runner lands with issue 6)"
+	@$(SETUP) bash $(ROOT)/tools/demo.sh
 
 clean:
 	rm -rf $(ROOT)/.catkin_ws $(ROOT)/test_results
@@ -73,3 +73,11 @@ bench-sim: build
 .PHONY: bench-blocks
 bench-blocks: build
 	@$(SETUP) python3 $(ROOT)/bench/bench_blocks.py --repeats 3
+# ---------------------------------------------------------------- monitor and experiment (issue 6)
+.PHONY: bench-monitor experiment-paper
+
+bench-monitor: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_monitor.py
+
+experiment-paper: build
+	@$(SETUP) bash $(ROOT)/tools/experiment_paper.sh
