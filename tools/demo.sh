@@ -11,6 +11,7 @@ sim_args=(courtyard --scale 1.0 --duration 40 --seed 1)
 stamp="$scenario/.demo-args"
 if [[ ! -f "$scenario/scenario.yaml" || "$(cat "$stamp" 2>/dev/null)" != "${sim_args[*]}" ]]; then
   echo "demo: simulating ${sim_args[*]} into $scenario"
+  mkdir -p "$out"
   python3 "$root/scripts/gpm" simulate "${sim_args[@]}" -o "$scenario" --overwrite --quiet
   echo "${sim_args[*]}" >"$stamp"
 else
