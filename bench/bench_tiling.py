@@ -96,6 +96,7 @@ def main() -> int:
                     "cpu": cpu_model(),
                     "cores": os.cpu_count(),
                     "threads_used": 1,
+                    "processes_used": 2,  # gpm tile forks one child that creates the tile files
                     "load_avg_1min": round(os.getloadavg()[0], 2),
                     "output_fs": subprocess.run(
                         ["stat", "-f", "-c", "%T", tmp], capture_output=True, text=True
