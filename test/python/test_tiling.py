@@ -3,6 +3,7 @@ order, the tile being floor(x / s), floor(y / s) computed per point in plain Pyt
 
 import json
 import math
+import shutil
 import subprocess
 import sys
 from collections import defaultdict
@@ -233,3 +234,35 @@ def test_cli_missing_input_and_bad_grid_size(tmp_path):
     done = run_gpm("tile", "--grid-size", "-2", str(src), "-o", str(tmp_path / "t"))
     assert done.returncode == 2 and "grid size must be a positive" in done.stderr
     assert not (tmp_path / "t").exists()
+
+
+def test_verify_reports_points_moved_between_tiles(tmp_path):
+    src = tmp_path / "map.pcd"
+    write_pcd(src, random_cloud(3000, 1.0, seed=8))
+    out = tmp_path / "tiles"
+    tile_map([src], out, TileConfig(grid_size=1.0))
+    index = load_tile_index(out)
+    a, b = (index.path(e) for e in index.tiles[:2])
+    pa, pb = read_pcd(a).points, read_pcd(b).points
+    pa[0], pb[0] = pb[0].copy(), pa[0].copy()  # same records and counts overall, two in the wrong cell
+    write_pcd(a, pa)
+    write_pcd(b, pb)
+    report = verify_tiles(out, [src])
+    assert report.misplaced_points == 2 and report.checksum_in == report.checksum_tiles
+    assert not report.ok and "2 tile points lie outside their tile's cell" in report.problems
+
+
+@pytest.mark.skipif(shutil.which("pcl_convert_pcd_ascii_binary") is None, reason="pcl-tools not installed")
+def test_pcl_reads_the_tiles(tmp_path):
+    src = tmp_path / "map.pcd"
+    write_pcd(src, random_cloud(2000, 4.0, seed=9))
+    tile_map([src], tmp_path / "tiles", TileConfig(grid_size=4.0))
+    index = load_tile_index(tmp_path / "tiles")
+    for entry in index.tiles[:5]:
+        converted = tmp_path / "pcl.pcd"
+        subprocess.run(
+            ["pcl_convert_pcd_ascii_binary", str(index.path(entry)), str(converted), "2"],
+            check=True,
+            capture_output=True,
+        )
+        assert read_pcd(converted).points.tobytes() == read_pcd(index.path(entry)).points.tobytes()

@@ -20,7 +20,7 @@ from grid_puzzle_localization.tiling.grouping import GROUP_DTYPE, merge_stats, t
 _IOV_MAX = 1024
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class TileData:
     """Where one tile's points are: ``spill`` file (or None) then ``parts`` (record bytes), in order."""
 
@@ -108,16 +108,14 @@ class TileBuffer:
         self._bytes = 0
 
 
-def write_all(fd: int, parts: list[np.ndarray]) -> None:
-    """Writes byte arrays to ``fd`` in order, with as few system calls as the kernel allows."""
+def write_all(fd: int, parts: list[bytes | np.ndarray]) -> None:
+    """Writes byte buffers to ``fd`` in order, with as few system calls as the kernel allows."""
     for k in range(0, len(parts), _IOV_MAX):
-        batch = parts[k : k + _IOV_MAX]
+        batch = [memoryview(p).cast("B") for p in parts[k : k + _IOV_MAX]]
         written = os.writev(fd, batch)
-        total = sum(p.nbytes for p in batch)
-        if written < total:  # partial write (e.g. > 2 GiB): finish part by part
-            for p in batch:
-                skip = min(written, p.nbytes)
-                written -= skip
-                view = memoryview(p)[skip:]
-                while len(view):
-                    view = view[os.write(fd, view) :]
+        for view in batch:  # finish a partial write (e.g. > 2 GiB) buffer by buffer
+            skip = min(written, len(view))
+            written -= skip
+            view = view[skip:]
+            while len(view):
+                view = view[os.write(fd, view) :]

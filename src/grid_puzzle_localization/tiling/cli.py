@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 from grid_puzzle_localization.errors import UserError
@@ -22,7 +23,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--memory-mb", type=float, default=TileConfig.memory_mb, help="working-set budget [MiB] (default %(default)s)"
     )
     parser.add_argument("--force", action="store_true", help="replace a non-empty OUT_DIR")
+    parser.add_argument(
+        "--processes",
+        type=int,
+        default=TileConfig.processes,
+        help="tile-writing processes, 1 or 2 (default %(default)s)",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar even on a terminal")
+    parser.add_argument("--json", action="store_true", help="print the tiling summary as one JSON line")
     parser.add_argument("--verify", type=Path, metavar="OUT_DIR", help="re-check a tiled map against MAP.pcd")
 
 
@@ -32,10 +40,26 @@ def run(args: argparse.Namespace) -> int:
     if args.grid_size is None or args.output is None:
         raise UserError("tiling needs --grid-size S and -o OUT_DIR (or --verify OUT_DIR to check a tiled map)")
     config = TileConfig(
-        grid_size=args.grid_size, memory_mb=args.memory_mb, force=args.force, progress=not args.no_progress
+        grid_size=args.grid_size,
+        memory_mb=args.memory_mb,
+        force=args.force,
+        progress=not args.no_progress,
+        processes=args.processes,
     )
     result = tile_map(args.inputs, args.output, config)
     index = result.index
+    if args.json:
+        summary = {
+            "points": index.points,
+            "tiles": len(index.tiles),
+            "nonfinite_dropped": index.nonfinite_dropped,
+            "spills": result.spills,
+            "seconds": result.seconds,
+            "seconds_stream": result.seconds_stream,
+            "seconds_write": result.seconds_write,
+        }
+        print(json.dumps(summary))
+        return 0
     print(
         f"{index.points} points in {len(index.tiles)} tiles of {index.grid_size:g} m -> {args.output}"
         f" ({index.nonfinite_dropped} NaN/inf points dropped, {result.spills} spills, {result.seconds:.2f} s)"

@@ -58,7 +58,7 @@ def group_chunk(records: np.ndarray, s: float, chunk: int = 0) -> tuple[np.ndarr
     i = tile_index(records["x"], s)
     j = tile_index(records["y"], s)
     order = stable_tile_order(i, j)
-    records, i, j = records[order], i[order], j[order]
+    records, i, j = take_records(records, order), i[order], j[order]
     n = len(records)
     if n == 0:
         return records, np.empty(0, dtype=GROUP_DTYPE)
@@ -74,6 +74,13 @@ def group_chunk(records: np.ndarray, s: float, chunk: int = 0) -> tuple[np.ndarr
         groups["min"][:, axis] = np.minimum.reduceat(values, starts)
         groups["max"][:, axis] = np.maximum.reduceat(values, starts)
     return records, groups
+
+
+def take_records(records: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """``records[order]`` for a structured array, through a byte-row view: numpy's fancy indexing of
+    structured records is about 20x slower than taking rows of bytes."""
+    raw = np.ascontiguousarray(records).view(np.uint8).reshape(len(records), records.dtype.itemsize)
+    return np.take(raw, order, axis=0).reshape(-1).view(records.dtype)
 
 
 def merge_stats(rows: np.ndarray) -> np.ndarray:

@@ -13,7 +13,8 @@ A tiled map directory holds one binary PCD per non-empty tile, named ``grid.tile
       "record_bytes": 12,               # bytes per point
       "points": 5052377,                # total points in all tiles
       "nonfinite_dropped": 0,           # input points with NaN/inf x, y or z (not in any tile)
-      "inputs": [{"path": "/abs/map.pcd", "points": 5052377, "data_bytes": 60628524}],
+      "inputs": [                       # POINTS and data bytes as declared; finite points tiled
+        {"path": "/abs/map.pcd", "points": 5052377, "finite_points": 5052377, "data_bytes": 60628524}],
       "tiles": [                        # sorted by key
         {"key": [i, j], "stem": "1.0_-3.0", "file": "1.0_-3.0.pcd", "center": [cx, cy],
          "points": 1234,

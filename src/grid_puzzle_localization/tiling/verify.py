@@ -72,7 +72,16 @@ def multiset_checksum(chunks: Iterable[np.ndarray]) -> tuple[int, int]:
     return points, total
 
 
+def _count_misplaced(chunks: Iterable[np.ndarray], key: tuple[int, int], s: float, report: VerifyReport):
+    """Passes chunks through, counting points outside tile ``key`` into the report."""
+    for chunk in chunks:
+        inside = (tile_index(chunk["x"], s) == key[0]) & (tile_index(chunk["y"], s) == key[1])
+        report.misplaced_points += int(np.count_nonzero(~inside))
+        yield chunk
+
+
 def verify_tiles(out_dir: str | os.PathLike, inputs: Sequence[str | os.PathLike]) -> VerifyReport:
+    """Checks a tiled map against its input PCD(s); problems are listed in the report, not raised."""
     index = load_tile_index(out_dir)
     report = VerifyReport(tiles=len(index.tiles))
     s = index.grid_size
@@ -100,11 +109,7 @@ def verify_tiles(out_dir: str | os.PathLike, inputs: Sequence[str | os.PathLike]
             )
         if parse_tile_stem(entry.stem, s) != entry.key:
             report.problems.append(f"{entry.file}: name does not match tile key {entry.key}")
-        chunks = list(iter_pcd_chunks(path))
-        for chunk in chunks:
-            inside = (tile_index(chunk["x"], s) == entry.key[0]) & (tile_index(chunk["y"], s) == entry.key[1])
-            report.misplaced_points += int(np.count_nonzero(~inside))
-        n, checksum = multiset_checksum(chunks)
+        n, checksum = multiset_checksum(_count_misplaced(iter_pcd_chunks(path), entry.key, s, report))
         report.points_tiles += n
         report.checksum_tiles = (report.checksum_tiles + checksum) % 2**64
     if report.misplaced_points:
