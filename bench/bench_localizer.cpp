@@ -2,7 +2,8 @@
 // vehicle as a window of tiles, and prints one JSON line: per-scan latency percentiles, the worst latency
 // while a target update was pending, target update times and peak RSS. No ROS.
 //
-// Usage: bench_localizer INPUT.bin cloud|tiles [--tile-size S] [--window N] [--threads T]
+// Usage: bench_localizer INPUT.bin cloud|tiles [--tile-size S] [--window N] [--threads T] [--resolution R]
+//                        [--max-range M]
 // INPUT.bin (little endian) is written by bench/bench_localizer.py:
 //   char[8] "GPLBENCH"; f64 rate_hz; u64 n_map; f32 map[n_map][3]; f64 base_T_sensor[16] (row-major);
 //   u64 n_scans; then per scan: f64 stamp; f64 truth[16] (map_T_base, row-major); u64 n; f32 points[n][3]
@@ -117,7 +118,7 @@ double percentile(std::vector<double> v, double q) {
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: %s INPUT.bin cloud|tiles [--tile-size S] [--window N] [--threads T]\n", argv[0]);
+    std::fprintf(stderr, "usage: %s INPUT.bin cloud|tiles [--tile-size S] [--window N] [--threads T] [--resolution R] [--max-range M]\n", argv[0]);
     return 2;
   }
   const std::string mode = argv[2];
@@ -128,6 +129,7 @@ int main(int argc, char** argv) {
   double tile_size = 10.0;
   int half_window = 3;
   int threads = -1;  // -1: the LocalizerConfig default
+  gpl::LocalizerConfig config;
   for (int i = 3; i + 1 < argc; i += 2) {
     const std::string opt = argv[i];
     if (opt == "--tile-size")
@@ -136,6 +138,10 @@ int main(int argc, char** argv) {
       half_window = std::stoi(argv[i + 1]);
     else if (opt == "--threads")
       threads = std::stoi(argv[i + 1]);
+    else if (opt == "--resolution")
+      config.ndt.resolution = std::stod(argv[i + 1]);
+    else if (opt == "--max-range")
+      config.preprocess.max_range = std::stod(argv[i + 1]);
     else {
       std::fprintf(stderr, "bench_localizer: unknown option %s\n", opt.c_str());
       return 2;
@@ -149,7 +155,6 @@ int main(int argc, char** argv) {
     return 2;
   }
 
-  gpl::LocalizerConfig config;
   if (threads >= 0) config.ndt.threads = threads;
   gpl::Localizer loc(config);
   const auto tiles = cutTiles(input.map, tile_size);
