@@ -118,7 +118,10 @@ double percentile(std::vector<double> v, double q) {
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: %s INPUT.bin cloud|tiles [--tile-size S] [--window N] [--threads T] [--resolution R] [--max-range M]\n", argv[0]);
+    std::fprintf(
+        stderr,
+        "usage: %s INPUT.bin cloud|tiles [--tile-size S] [--window N] [--threads T] [--resolution R] [--max-range M]\n",
+        argv[0]);
     return 2;
   }
   const std::string mode = argv[2];
