@@ -13,6 +13,7 @@
 // are the exact derivatives of Rx(roll) Ry(pitch) Rz(yaw) (product rule), checked against finite differences.
 #include "grid_puzzle_localization/ndt.hpp"
 
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <array>
@@ -149,7 +150,7 @@ class Evaluator {
     const Eigen::Matrix3f R = rd.R.cast<float>();
     const Eigen::Vector3f t = p.head<3>().cast<float>();
     const int n_chunks = static_cast<int>(chunks_.size());
-#pragma omp parallel for num_threads(threads_) schedule(static)
+#pragma omp parallel for num_threads(threads_) schedule(dynamic, 1)
     for (int c = 0; c < n_chunks; ++c) {
       const std::size_t lo = static_cast<std::size_t>(c) * kChunk;
       const std::size_t hi = std::min(points_.size(), lo + kChunk);
@@ -176,7 +177,7 @@ class Evaluator {
     std::vector<double> best_sum(n_chunks, 0.0);
     std::vector<std::size_t> matched(n_chunks, 0), inliers(n_chunks, 0);
     std::vector<std::vector<const VoxelGaussian*>> used(n_chunks);
-#pragma omp parallel for num_threads(threads_) schedule(static)
+#pragma omp parallel for num_threads(threads_) schedule(dynamic, 1)
     for (int c = 0; c < n_chunks; ++c) {
       const std::size_t lo = static_cast<std::size_t>(c) * kChunk;
       const std::size_t hi = std::min(points_.size(), lo + kChunk);
@@ -352,6 +353,8 @@ Vector6d newtonStep(const NdtDerivatives& D) {
   return -(eig.eigenvectors() * inv.asDiagonal() * eig.eigenvectors().transpose()) * D.gradient;
 }
 
+bool isPositiveDefinite(const Matrix6d& H) { return Eigen::LLT<Matrix6d>(H).info() == Eigen::Success; }
+
 NdtResult failure(NdtResult r, NdtStatus status, const std::string& message) {
   r.status = status;
   r.message = message;
@@ -437,7 +440,9 @@ NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, co
       D = ev.evaluate(p + step * dir, true);
     }
     p += step * dir;
-    if (step < config_.transformation_epsilon) {
+    // A short step alone is not convergence: DIRECT searches can stall on a saddle or a ridge of the piecewise-
+    // smooth cost, where the saddle-free step keeps going downhill. Require a positive definite Hessian too.
+    if (step < config_.transformation_epsilon && isPositiveDefinite(D.hessian)) {
       converged = true;
       break;
     }
@@ -446,23 +451,28 @@ NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, co
     return failure(r, NdtStatus::DEGENERATE, "the optimisation diverged to a non-finite pose; the guess is returned");
 
   const FinalStats fs = ev.finalStats(p);
-  Eigen::SelfAdjointEigenSolver<Matrix6d> eig(D.hessian);
-  const double lmin = eig.eigenvalues()(0), lmax = eig.eigenvalues()(5);
+  const Vector6d magnitudes = Eigen::SelfAdjointEigenSolver<Matrix6d>(D.hessian).eigenvalues().cwiseAbs();
   r.hessian = D.hessian;
   r.score = D.cost;
   r.transformation_probability = -D.cost / static_cast<double>(pts.size());
   r.nvtl = fs.nvtl;
   r.inlier_fraction = fs.inlier_fraction;
-  if (fs.matched_voxels < kMinMatchedVoxels || !(lmax > 0.0) || !(lmin > kMinHessianEigenRatio * lmax)) {
+  if (fs.matched_voxels < kMinMatchedVoxels)
+    return failure(r, NdtStatus::DEGENERATE,
+                   "the match is degenerate: only " + std::to_string(fs.matched_voxels) +
+                       " distinct target voxels matched (at least " + std::to_string(kMinMatchedVoxels) +
+                       " are needed to fix 6 DoF); the guess is returned");
+  if (!(magnitudes.minCoeff() > kMinHessianEigenRatio * magnitudes.maxCoeff())) {
     std::ostringstream msg;
-    msg << "the match is degenerate: " << fs.matched_voxels << " distinct target voxels matched (need at least "
-        << kMinMatchedVoxels << "), Hessian eigenvalues in [" << lmin << ", " << lmax << "]; the guess is returned";
+    msg << "the match is degenerate: the Hessian is singular (eigenvalue magnitudes in [" << magnitudes.minCoeff()
+        << ", " << magnitudes.maxCoeff() << "]), some direction is unconstrained; the guess is returned";
     return failure(r, NdtStatus::DEGENERATE, msg.str());
   }
   r.transform = poseToMatrix(p).cast<float>();
   r.converged = converged;
   r.status = converged ? NdtStatus::OK : NdtStatus::MAX_ITERATIONS;
-  if (!converged) r.message = "stopped after max_iterations without the step falling below transformation_epsilon";
+  if (!converged)
+    r.message = "stopped after max_iterations before the step fell below transformation_epsilon at a minimum";
   return r;
 }
 
