@@ -27,11 +27,19 @@ format: setup
 	$(ROOT)/.venv/bin/ruff format $(PY_SOURCES)
 
 demo: build
-	@echo "make demo: not yet implemented (the experiment runner lands with issue 6)"
+	@$(SETUP) bash $(ROOT)/tools/demo.sh
 
 clean:
 	rm -rf $(ROOT)/.catkin_ws $(ROOT)/test_results
 
+# ---- tiling benchmark (issue 2) ----
+.PHONY: bench-tiling
+bench-tiling: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_tiling.py
+# ---------------------------------------------------------------- tile provider benchmark (issue 5)
+.PHONY: bench-provider
+bench-provider: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_provider.py
 # ---------------------------------------------------------------- NDT scan matcher (issue 3)
 .PHONY: bench-ndt tsan
 
@@ -60,3 +68,19 @@ tsan-localizer: setup
 	cmake -S $(ROOT)/test/tsan_localizer -B $(ROOT)/.catkin_ws/build_tsan_localizer -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
 	cmake --build $(ROOT)/.catkin_ws/build_tsan_localizer -j2
 	cd $(ROOT) && TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(ROOT)/.catkin_ws/build_tsan_localizer/tsan_localizer_tests
+# --- scenario simulator (gpm simulate) ---
+.PHONY: bench-sim
+bench-sim: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_sim.py
+# ---------------------------------------------------------------- block maps (issue 8)
+.PHONY: bench-blocks
+bench-blocks: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_blocks.py --repeats 3
+# ---------------------------------------------------------------- monitor and experiment (issue 6)
+.PHONY: bench-monitor experiment-paper
+
+bench-monitor: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_monitor.py
+
+experiment-paper: build
+	@$(SETUP) bash $(ROOT)/tools/experiment_paper.sh

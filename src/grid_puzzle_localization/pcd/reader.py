@@ -1,0 +1,165 @@
+"""Reading PCD files whole (``read_pcd``) or in chunks (``iter_pcd_chunks``).
+
+``binary`` data is read through a numpy memmap one chunk at a time, so files larger than RAM
+stream; ``ascii`` is decoded line batch by line batch; ``binary_compressed`` (LZF over the whole data
+section, stored field by field) cannot be streamed and is decompressed once. Points with a NaN or
+infinite x, y or z are dropped and counted, never silently.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import struct
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import lzf
+import numpy as np
+
+from grid_puzzle_localization.errors import PcdError
+from grid_puzzle_localization.pcd.ascii_codec import decode_ascii_lines
+from grid_puzzle_localization.pcd.header import PcdHeader, read_pcd_header
+
+XYZ = ("x", "y", "z")
+
+
+@dataclass
+class PcdCloud:
+    """A whole PCD file: finite points (structured array, fields and dtypes as in the file)."""
+
+    points: np.ndarray
+    header: PcdHeader
+    nonfinite_dropped: int
+
+
+def xyz_array(points: np.ndarray) -> np.ndarray:
+    """(N, 3) float64 array of the x, y, z fields of a structured point array [m]."""
+    out = np.empty((len(points), 3), dtype=np.float64)
+    for k, name in enumerate(XYZ):
+        out[:, k] = points[name]
+    return out
+
+
+class PcdChunks:
+    """Iterator over the finite points of a PCD file as structured arrays of at most ``chunk_points``
+    records. ``header`` is known at once; ``points_kept`` and ``nonfinite_dropped`` grow while
+    iterating and are final once the iterator is exhausted."""
+
+    def __init__(self, path: str | os.PathLike, chunk_points: int = 1_000_000):
+        if chunk_points < 1:
+            raise ValueError("chunk_points must be at least 1")
+        self.path = path
+        self.header = read_pcd_header(path)
+        check_xyz(self.header, path)
+        self.chunk_points = chunk_points
+        self.points_kept = 0
+        self.nonfinite_dropped = 0
+        decoder = {"binary": self._binary, "binary_compressed": self._compressed, "ascii": self._ascii}
+        self._blocks = decoder[self.header.data]()
+
+    def __iter__(self) -> PcdChunks:
+        return self
+
+    def __next__(self) -> np.ndarray:
+        block = next(self._blocks)
+        mask = np.isfinite(block["x"]) & np.isfinite(block["y"]) & np.isfinite(block["z"])
+        kept = np.array(block) if mask.all() else np.asarray(block[mask])
+        self.points_kept += len(kept)
+        self.nonfinite_dropped += len(block) - len(kept)
+        return kept
+
+    def _binary(self) -> Iterator[np.ndarray]:
+        h = self.header
+        available = os.path.getsize(self.path) - h.header_bytes
+        if available < h.data_bytes:
+            raise PcdError(
+                f"{self.path}: truncated: POINTS {h.points} x {h.record_bytes} bytes needs {h.data_bytes} bytes of data"
+                f" but the file holds {available}; re-export or re-download the file"
+            )
+        if available > h.data_bytes:
+            raise PcdError(
+                f"{self.path}: POINTS {h.points} disagrees with the data: {available} data bytes hold"
+                f" {available / h.record_bytes:g} records of {h.record_bytes} bytes"
+            )
+        if h.points == 0:
+            return
+        records = np.memmap(self.path, dtype=h.dtype, mode="r", offset=h.header_bytes, shape=(h.points,))
+        for start in range(0, h.points, self.chunk_points):
+            yield records[start : start + self.chunk_points]
+
+    def _compressed(self) -> Iterator[np.ndarray]:
+        h = self.header
+        records = read_compressed(self.path, h)
+        for start in range(0, h.points, self.chunk_points):
+            yield records[start : start + self.chunk_points]
+
+    def _ascii(self) -> Iterator[np.ndarray]:
+        h = self.header
+        with open(self.path, "rb") as f:
+            first_line = f.read(h.header_bytes).count(b"\n") + 1
+            seen = 0
+            while True:
+                lines = [line for line in itertools.islice(f, self.chunk_points) if line.strip()]
+                if not lines:
+                    break
+                if seen + len(lines) > h.points:
+                    raise PcdError(f"{self.path}: POINTS {h.points} disagrees with the data: more data lines follow")
+                yield decode_ascii_lines(lines, h.dtype, self.path, first_line + seen)
+                seen += len(lines)
+        if seen < h.points:
+            raise PcdError(f"{self.path}: truncated: POINTS {h.points} but only {seen} data lines")
+
+
+def read_compressed(path: str | os.PathLike, h: PcdHeader) -> np.ndarray:
+    """Decodes a ``binary_compressed`` data section into an array of ``h.dtype`` records."""
+    with open(path, "rb") as f:
+        f.seek(h.header_bytes)
+        sizes = f.read(8)
+        if h.data_bytes == 0:
+            return np.empty(0, dtype=h.dtype)
+        if len(sizes) < 8:
+            raise PcdError(f"{path}: truncated: the binary_compressed data section is missing")
+        compressed_size, raw_size = struct.unpack("<II", sizes)
+        if raw_size != h.data_bytes:
+            raise PcdError(
+                f"{path}: POINTS {h.points} disagrees with the data: it decompresses to {raw_size} bytes,"
+                f" not {h.points} x {h.record_bytes} = {h.data_bytes}"
+            )
+        payload = f.read(compressed_size)
+    if len(payload) < compressed_size:
+        raise PcdError(f"{path}: truncated: {compressed_size} compressed bytes declared, {len(payload)} present")
+    raw = lzf.decompress(payload, raw_size)
+    if raw is None or len(raw) != raw_size:
+        raise PcdError(f"{path}: corrupt binary_compressed data (LZF does not decompress to {raw_size} bytes)")
+    out = np.empty(h.points, dtype=h.dtype)
+    offset = 0
+    for name in h.dtype.names:
+        field = h.dtype.fields[name][0]
+        count = h.points * int(np.prod(field.shape))
+        column = np.frombuffer(raw, dtype=field.base, count=count, offset=offset)
+        out[name] = column.reshape((h.points, *field.shape))
+        offset += column.nbytes
+    return out
+
+
+def check_xyz(header: PcdHeader, path: str | os.PathLike) -> None:
+    """Raises PcdError unless the cloud has scalar x, y and z fields."""
+    for name in XYZ:
+        if name not in header.fields:
+            raise PcdError(f"{path}: no '{name}' field (fields: {' '.join(header.fields)}); a map needs x, y and z")
+        if header.counts[header.fields.index(name)] != 1:
+            raise PcdError(f"{path}: field '{name}' has COUNT > 1; x, y and z must be single values")
+
+
+def iter_pcd_chunks(path: str | os.PathLike, chunk_points: int = 1_000_000) -> PcdChunks:
+    """Streams the finite points of a PCD file; see PcdChunks for the drop count."""
+    return PcdChunks(path, chunk_points)
+
+
+def read_pcd(path: str | os.PathLike) -> PcdCloud:
+    """Reads a whole PCD file (any encoding); NaN/inf-xyz points are dropped and counted."""
+    chunks = iter_pcd_chunks(path, chunk_points=1 << 24)
+    parts = list(chunks)
+    points = np.concatenate(parts) if parts else np.empty(0, dtype=chunks.header.dtype)
+    return PcdCloud(points=points, header=chunks.header, nonfinite_dropped=chunks.nonfinite_dropped)
