@@ -59,7 +59,10 @@ tsan: setup
 
 # ---------------------------------------------------------------- NDT localizer (issue 4)
 .PHONY: bench-localizer tsan-localizer
-bench-localizer: build
+# Build output goes to .catkin_ws/bench_localizer_build.log so stdout holds only the JSON lines.
+bench-localizer: setup
+	@log=$(ROOT)/.catkin_ws/bench_localizer_build.log; mkdir -p $(ROOT)/.catkin_ws; \
+	  bash $(ROOT)/tools/build.sh >$$log 2>&1 || { tail -40 $$log; exit 1; }
 	@$(SETUP) python3 $(ROOT)/bench/bench_localizer.py
 
 # ThreadSanitizer build of the ROS-free localizer core (update worker, NDT target, localizer) and its
