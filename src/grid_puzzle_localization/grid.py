@@ -14,6 +14,7 @@ unambiguously. Examples for ``s = 2``: ``1.0_-3.0``; for ``s = 0.5``: ``0.25_-0.
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 from fractions import Fraction
@@ -45,6 +46,7 @@ def tile_center(i: int, s: float) -> float:
     return (i + 0.5) * s
 
 
+@functools.lru_cache(maxsize=1 << 16)  # a tiler names ~1e5 tiles sharing few distinct i, j
 def format_center(i: int, s: float) -> str:
     """Decimal text of the centre of tile ``i`` (see module docstring for the format)."""
     exact = (Fraction(i) + Fraction(1, 2)) * Fraction(s)

@@ -1,0 +1,110 @@
+#!/usr/bin/env python3
+"""Benchmark of `gpm tile`: the real campus map (nova_utd_tiles, 5.05 M points) merged into one
+global PCD (not timed), re-cut with s = 2 m under --memory-mb 200 in a child process whose wall time
+and peak RSS are measured. Prints one JSON line (median over repeats, with hardware info)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from grid_puzzle_localization.pcd import merge_pcds
+from grid_puzzle_localization.tiling import load_tile_index
+
+ROOT = Path(__file__).resolve().parents[1]
+CAMPUS_TILES = ROOT.parent / "shared" / "data" / "real" / "nova_utd_tiles" / "tiles"
+GPM = "import sys; from grid_puzzle_localization.cli import main; sys.exit(main())"
+
+
+def cpu_model() -> str:
+    for line in Path("/proc/cpuinfo").read_text().splitlines():
+        if line.startswith("model name"):
+            return line.split(":", 1)[1].strip()
+    return platform.processor()
+
+
+def run_child(args: list[str]) -> tuple[float, float, dict]:
+    """(wall seconds, peak RSS MiB, the JSON summary it printed) of one child process."""
+    start = time.perf_counter()
+    child = subprocess.Popen(args, stdout=subprocess.PIPE)
+    output = child.stdout.read()
+    _, status, usage = os.wait4(child.pid, 0)
+    seconds = time.perf_counter() - start
+    code = os.waitstatus_to_exitcode(status)
+    if code != 0:
+        raise SystemExit(f"bench_tiling: {' '.join(args)} failed with status {code}")
+    return seconds, usage.ru_maxrss / 1024.0, json.loads(output)  # ru_maxrss is in KiB on Linux
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--grid-size", type=float, default=2.0)
+    parser.add_argument("--memory-mb", type=float, default=200.0)
+    parser.add_argument("--tmp-dir", default=None, help="where the merged map and the tiles go (default: system temp)")
+    args = parser.parse_args()
+    inputs = sorted(CAMPUS_TILES.glob("*.pcd"))
+    if not inputs:
+        raise SystemExit(f"bench_tiling: no campus tiles in {CAMPUS_TILES}")
+    with tempfile.TemporaryDirectory(prefix="bench_tiling_", dir=args.tmp_dir) as tmp:
+        campus = Path(tmp) / "campus.pcd"
+        points_in = merge_pcds(inputs, campus)
+        out = Path(tmp) / "tiles"
+        seconds, rss, phases = [], [], []
+        for _ in range(args.repeats):
+            shutil.rmtree(out, ignore_errors=True)
+            command = [sys.executable, "-c", GPM, "tile", "--json", "--grid-size", f"{args.grid_size:g}"]
+            wall, peak, summary = run_child(
+                [*command, "--memory-mb", f"{args.memory_mb:g}", str(campus), "-o", str(out)]
+            )
+            seconds.append(wall)
+            rss.append(peak)
+            phases.append(summary)
+        index = load_tile_index(out)
+        median = statistics.median(seconds)
+        print(
+            json.dumps(
+                {
+                    "bench": "tiling",
+                    "grid_size_m": args.grid_size,
+                    "memory_mb": args.memory_mb,
+                    "points_in": points_in,
+                    "points_out": index.points,
+                    "tiles": len(index.tiles),
+                    "seconds": round(median, 3),
+                    "points_per_s": round(points_in / median),
+                    "peak_rss_mb": round(max(rss), 1),
+                    "bytes_in": campus.stat().st_size,
+                    "bytes_tiles_data": sum(t.data_bytes for t in index.tiles),
+                    "bytes_tiles_total": sum(t.bytes for t in index.tiles),
+                    "repeats": args.repeats,
+                    "seconds_all": [round(s, 3) for s in seconds],
+                    "seconds_stream_median": round(statistics.median(p["seconds_stream"] for p in phases), 3),
+                    "seconds_write_median": round(statistics.median(p["seconds_write"] for p in phases), 3),
+                    "stream_points_per_s": round(points_in / statistics.median(p["seconds_stream"] for p in phases)),
+                    "timing": "seconds: median wall time of the gpm process (Python start-up included);"
+                    " stream: reading + grouping + spilling; write: creating the tile files and index",
+                    "cpu": cpu_model(),
+                    "cores": os.cpu_count(),
+                    "threads_used": 1,
+                    "load_avg_1min": round(os.getloadavg()[0], 2),
+                    "output_fs": subprocess.run(
+                        ["stat", "-f", "-c", "%T", tmp], capture_output=True, text=True
+                    ).stdout.strip(),
+                }
+            )
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,268 @@
+"""The tiler against brute force: every finite point in exactly one tile, bit for bit and in input
+order, the tile being floor(x / s), floor(y / s) computed per point in plain Python."""
+
+import json
+import math
+import shutil
+import subprocess
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from grid_puzzle_localization.cli import main
+from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.grid import tile_filename
+from grid_puzzle_localization.pcd import read_pcd, write_pcd
+from grid_puzzle_localization.tiling import (
+    AUTOWARE_METADATA_FILE,
+    TileConfig,
+    load_tile_index,
+    tile_map,
+    verify_tiles,
+)
+from grid_puzzle_localization.tiling.grouping import stable_tile_order
+
+FIELDS = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<u1"), ("t", "<f8"), ("n", "<f4", (2,))])
+
+
+def random_cloud(n: int, s: float, seed: int) -> np.ndarray:
+    """Points around the origin (negative and positive), a tenth of them exactly on cell boundaries."""
+    rng = np.random.default_rng(seed)
+    cloud = np.frombuffer(rng.bytes(n * FIELDS.itemsize), dtype=FIELDS).copy()
+    cloud["x"] = rng.uniform(-10 * s, 10 * s, n)
+    cloud["y"] = rng.uniform(-7 * s, 13 * s, n)
+    cloud["z"] = rng.normal(0.0, 5.0, n)
+    edge = rng.random(n) < 0.1
+    cloud["x"][edge] = rng.integers(-10, 10, edge.sum()) * np.float32(s)
+    cloud["y"][edge[::-1]] = rng.integers(-7, 13, edge.sum()) * np.float32(s)
+    return cloud
+
+
+def records_of(cloud: np.ndarray) -> list[bytes]:
+    raw = cloud.tobytes()
+    size = cloud.dtype.itemsize
+    return [raw[k : k + size] for k in range(0, len(raw), size)]
+
+
+def expected_tiles(cloud: np.ndarray, s: float) -> dict[tuple[int, int], bytes]:
+    tiles: dict[tuple[int, int], list[bytes]] = defaultdict(list)
+    for record, x, y in zip(records_of(cloud), cloud["x"].tolist(), cloud["y"].tolist(), strict=True):
+        tiles[(math.floor(x / s), math.floor(y / s))].append(record)
+    return {key: b"".join(records) for key, records in tiles.items()}
+
+
+def tiled_contents(out_dir: Path) -> dict[tuple[int, int], bytes]:
+    index = load_tile_index(out_dir)
+    return {entry.key: read_pcd(index.path(entry)).points.tobytes() for entry in index.tiles}
+
+
+@pytest.mark.parametrize(("s", "memory_mb"), [(2.0, 64.0), (0.3, 1.0), (5.0, 1.0)])
+def test_every_point_in_exactly_its_tile_bit_for_bit(tmp_path, s, memory_mb):
+    # memory_mb 1 forces many spills to disk; 64 keeps everything in memory.
+    cloud = random_cloud(60_000, s, seed=int(s * 10))
+    src = tmp_path / "map.pcd"
+    write_pcd(src, cloud)
+    result = tile_map([src], tmp_path / "tiles", TileConfig(grid_size=s, memory_mb=memory_mb))
+    assert (result.spills > 0) == (memory_mb == 1.0)
+    expected = expected_tiles(cloud, s)
+    assert tiled_contents(tmp_path / "tiles") == expected
+    index = load_tile_index(tmp_path / "tiles")
+    assert index.points == len(cloud) and index.nonfinite_dropped == 0
+    for entry in index.tiles:
+        assert entry.file == tile_filename(*entry.key, s)
+        points = read_pcd(index.path(entry)).points
+        assert entry.points == len(points)
+        assert entry.bounds["min"] == [float(points[c].min()) for c in "xyz"]
+        assert entry.bounds["max"] == [float(points[c].max()) for c in "xyz"]
+        assert entry.bytes == index.path(entry).stat().st_size
+    assert sorted(p.name for p in (tmp_path / "tiles").iterdir()) == sorted(
+        [e.file for e in index.tiles] + ["index.json", AUTOWARE_METADATA_FILE]
+    )
+    assert verify_tiles(tmp_path / "tiles", [src]).ok
+
+
+def test_nonfinite_points_dropped_and_counted(tmp_path):
+    cloud = random_cloud(1000, 1.0, seed=7)
+    cloud["x"][[1, 5]] = np.nan
+    cloud["z"][9] = np.inf
+    src = tmp_path / "map.pcd"
+    write_pcd(src, cloud)
+    tile_map([src], tmp_path / "tiles", TileConfig(grid_size=1.0))
+    index = load_tile_index(tmp_path / "tiles")
+    assert index.nonfinite_dropped == 3 and index.points == 997
+    finite = np.isfinite(cloud["x"]) & np.isfinite(cloud["z"])
+    assert tiled_contents(tmp_path / "tiles") == expected_tiles(cloud[finite], 1.0)
+
+
+def test_autoware_metadata_lists_each_tile_corner(tmp_path):
+    s = 2.5
+    cloud = random_cloud(2000, s, seed=3)
+    src = tmp_path / "map.pcd"
+    write_pcd(src, cloud)
+    tile_map([src], tmp_path / "tiles", TileConfig(grid_size=s))
+    meta = yaml.safe_load((tmp_path / "tiles" / AUTOWARE_METADATA_FILE).read_text())
+    keys = expected_tiles(cloud, s).keys()
+    assert meta.pop("x_resolution") == s and meta.pop("y_resolution") == s
+    assert meta == {tile_filename(i, j, s): [i * s, j * s] for i, j in keys}
+    for name, (min_x, min_y) in meta.items():
+        points = read_pcd(tmp_path / "tiles" / name).points
+        assert (points["x"] >= min_x).all() and (points["x"] < min_x + s).all()
+        assert (points["y"] >= min_y).all() and (points["y"] < min_y + s).all()
+
+
+def test_utm_terrain_binary_compressed_pieces(real_data, tmp_path):
+    # Two real airborne scans (UTM 32U, y ~ 5.4e6 m, binary_compressed) as pieces of one map.
+    pieces = [real_data / "isprs_terrain_utm" / name for name in ("samp11-utm.pcd", "CSite1_red2-utm.pcd")]
+    s = 20.0
+    tile_map(pieces, tmp_path / "tiles", TileConfig(grid_size=s, memory_mb=2.0))
+    cloud = np.concatenate([read_pcd(p).points for p in pieces])
+    assert tiled_contents(tmp_path / "tiles") == expected_tiles(cloud, s)
+    index = load_tile_index(tmp_path / "tiles")
+    assert min(e.key[1] for e in index.tiles) > 5.3e6 / s  # UTM northings kept exact
+    assert verify_tiles(tmp_path / "tiles", pieces).ok
+
+
+def test_inputs_with_different_fields_are_refused(tmp_path, real_data):
+    other = tmp_path / "other.pcd"
+    write_pcd(other, random_cloud(10, 1.0, seed=1))
+    with pytest.raises(UserError, match=r"other\.pcd: fields .* differ from .*samp11-utm\.pcd"):
+        tile_map([real_data / "isprs_terrain_utm" / "samp11-utm.pcd", other], tmp_path / "t", TileConfig(2.0))
+    assert not (tmp_path / "t").exists()
+
+
+def test_failure_leaves_no_output_behind(tmp_path):
+    good, bad = tmp_path / "good.pcd", tmp_path / "bad.pcd"
+    write_pcd(good, random_cloud(5000, 1.0, seed=2))
+    write_pcd(bad, random_cloud(5000, 1.0, seed=3))
+    bad.write_bytes(bad.read_bytes()[:-100])  # truncated: detected only while streaming
+    with pytest.raises(UserError, match=r"bad\.pcd: truncated"):
+        tile_map([good, bad], tmp_path / "out", TileConfig(grid_size=1.0))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.pcd", "good.pcd"]
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(st.tuples(st.integers(-(2**40), 2**40), st.integers(-(2**40), 2**40)), max_size=300),
+    st.integers(0, 3),
+)
+def test_radix_order_equals_stable_lexsort(keys, spread):
+    ij = np.array(keys, dtype=np.int64).reshape(-1, 2) >> (10 * spread)  # from wide to narrow key ranges
+    order = stable_tile_order(ij[:, 0], ij[:, 1])
+    np.testing.assert_array_equal(order, np.lexsort((ij[:, 1], ij[:, 0])))
+
+
+# ---- the real campus map: merged into one global PCD, re-cut, conserved ----
+
+
+@pytest.fixture(scope="module")
+def campus_map(real_data, tmp_path_factory) -> Path:
+    from grid_puzzle_localization.pcd import merge_pcds
+
+    path = tmp_path_factory.mktemp("campus") / "campus.pcd"
+    merge_pcds(sorted((real_data / "nova_utd_tiles" / "tiles").glob("*.pcd")), path)
+    return path
+
+
+@pytest.mark.parametrize("s", [2.0, 20.0])
+def test_real_campus_map_recut_conserves_points(campus_map, tmp_path, s):
+    out = tmp_path / f"s{s:g}"
+    result = tile_map([campus_map], out, TileConfig(grid_size=s, memory_mb=32.0))
+    assert result.spills > 0  # 60 MB of points through an 18 MB buffer
+    assert result.index.points == 5_052_377  # as documented for the data set
+    report = verify_tiles(out, [campus_map])
+    assert report.ok, report.problems
+    assert report.points_in == report.points_tiles == 5_052_377
+    assert report.bytes_tiles_data == report.bytes_in_data == 5_052_377 * 12
+    assert report.bytes_tiles_total == report.bytes_tiles_data + report.bytes_tiles_headers
+    if s == 20.0:  # brute force on the whole set (cheap with few tiles): sorted records are equal
+        tiles = np.concatenate([read_pcd(result.index.path(e)).points for e in result.index.tiles])
+        cloud = read_pcd(campus_map).points
+        order_t = np.lexsort((tiles["z"], tiles["y"], tiles["x"]))
+        order_c = np.lexsort((cloud["z"], cloud["y"], cloud["x"]))
+        assert tiles[order_t].tobytes() == cloud[order_c].tobytes()
+
+
+# ---- command line ----
+
+
+def run_gpm(*args: str) -> subprocess.CompletedProcess:
+    code = "import sys; from grid_puzzle_localization.cli import main; sys.exit(main())"
+    return subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True)
+
+
+def test_cli_tiles_verifies_and_detects_tampering(tmp_path):
+    src = tmp_path / "map.pcd"
+    write_pcd(src, random_cloud(3000, 1.0, seed=5))
+    out = tmp_path / "tiles"
+    assert main(["tile", "--grid-size", "1", str(src), "-o", str(out)]) == 0
+    done = run_gpm("tile", "--verify", str(out), str(src))
+    assert done.returncode == 0 and "conservation: OK" in done.stdout
+    index = json.loads((out / "index.json").read_text())
+    victim = out / index["tiles"][0]["file"]
+    cloud = read_pcd(victim).points
+    write_pcd(victim, cloud[:-1])
+    done = run_gpm("tile", "--verify", str(out), str(src))
+    assert done.returncode == 1 and "conservation: FAILED" in done.stdout
+
+
+def test_cli_refuses_non_empty_output_without_force(tmp_path):
+    src = tmp_path / "map.pcd"
+    write_pcd(src, random_cloud(100, 1.0, seed=6))
+    out = tmp_path / "tiles"
+    out.mkdir()
+    (out / "keep.txt").write_text("mine")
+    done = run_gpm("tile", "--grid-size", "1", str(src), "-o", str(out))
+    assert done.returncode == 2
+    assert "tiles: output directory is not empty" in done.stderr and "--force" in done.stderr
+    assert (out / "keep.txt").read_text() == "mine"
+    assert run_gpm("tile", "--grid-size", "1", str(src), "-o", str(out), "--force").returncode == 0
+    assert not (out / "keep.txt").exists() and (out / "index.json").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["map.pcd", "tiles"]
+
+
+def test_cli_missing_input_and_bad_grid_size(tmp_path):
+    done = run_gpm("tile", "--grid-size", "1", str(tmp_path / "nope.pcd"), "-o", str(tmp_path / "t"))
+    assert done.returncode == 2 and "nope.pcd: no such file" in done.stderr
+    src = tmp_path / "map.pcd"
+    write_pcd(src, random_cloud(10, 1.0, seed=6))
+    done = run_gpm("tile", "--grid-size", "-2", str(src), "-o", str(tmp_path / "t"))
+    assert done.returncode == 2 and "grid size must be a positive" in done.stderr
+    assert not (tmp_path / "t").exists()
+
+
+def test_verify_reports_points_moved_between_tiles(tmp_path):
+    src = tmp_path / "map.pcd"
+    write_pcd(src, random_cloud(3000, 1.0, seed=8))
+    out = tmp_path / "tiles"
+    tile_map([src], out, TileConfig(grid_size=1.0))
+    index = load_tile_index(out)
+    a, b = (index.path(e) for e in index.tiles[:2])
+    pa, pb = read_pcd(a).points, read_pcd(b).points
+    pa[0], pb[0] = pb[0].copy(), pa[0].copy()  # same records and counts overall, two in the wrong cell
+    write_pcd(a, pa)
+    write_pcd(b, pb)
+    report = verify_tiles(out, [src])
+    assert report.misplaced_points == 2 and report.checksum_in == report.checksum_tiles
+    assert not report.ok and "2 tile points lie outside their tile's cell" in report.problems
+
+
+@pytest.mark.skipif(shutil.which("pcl_convert_pcd_ascii_binary") is None, reason="pcl-tools not installed")
+def test_pcl_reads_the_tiles(tmp_path):
+    src = tmp_path / "map.pcd"
+    write_pcd(src, random_cloud(2000, 4.0, seed=9))
+    tile_map([src], tmp_path / "tiles", TileConfig(grid_size=4.0))
+    index = load_tile_index(tmp_path / "tiles")
+    for entry in index.tiles[:5]:
+        converted = tmp_path / "pcl.pcd"
+        subprocess.run(
+            ["pcl_convert_pcd_ascii_binary", str(index.path(entry)), str(converted), "2"],
+            check=True,
+            capture_output=True,
+        )
+        assert read_pcd(converted).points.tobytes() == read_pcd(index.path(entry)).points.tobytes()
