@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from grid_puzzle_localization.blocks.storage import storage_table
 from grid_puzzle_localization.pcd.header import read_pcd_header
 
 
@@ -42,9 +43,14 @@ def tiles_storage(tile_dir: str | os.PathLike, global_map: str | os.PathLike) ->
     }
 
 
-def storage_figures(global_map: str | os.PathLike, tile_dir: str | os.PathLike | None) -> dict:
-    """What summary.json holds under ``storage``."""
+def storage_figures(
+    global_map: str | os.PathLike, tile_dir: str | os.PathLike | None, block_dir: str | os.PathLike | None = None
+) -> dict:
+    """What summary.json holds under ``storage``: the byte breakdown of the map and the tiles, and one
+    row per representation (global map, tiles, block maps) with its overlap factor, from the block
+    maps' storage table."""
     figures: dict = {"global_map": map_storage(global_map)}
     if tile_dir is not None:
         figures["tiles"] = tiles_storage(tile_dir, global_map)
+    figures["representations"] = [row.as_dict() for row in storage_table(global_map, tile_dir, block_dir)]
     return figures

@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     cfg.check()
     tile_dir = cfg.tiles or cfg.out_dir / f"tiles_s{cfg.window.grid_size_m:g}"
     tiles = ensure_tiles(cfg.global_map, tile_dir, cfg.window.grid_size_m)
-    summary = run_experiment(cfg, tiles, storage_figures(cfg.global_map, tiles))
+    summary = run_experiment(cfg, tiles, storage_figures(cfg.global_map, tiles, cfg.blocks))
     print("\n".join(comparison_table(summary)))
     print(f"\nreport: {cfg.out_dir / 'report.md'}, plots: {cfg.out_dir / 'plots'}/")
     return 0

@@ -163,6 +163,18 @@ def storage_table(summary: Mapping) -> list[str]:
                 f"| {key.replace('_', ' ')} | {s['files']:,} | {s['bytes']:,} | {s['data_bytes']:,} "
                 f"| {s['header_bytes']:,} | {s['disk_bytes'] - s['bytes']:,} |"
             )
+    rows = storage.get("representations")
+    if rows:
+        lines += [
+            "",
+            "| representation | files | bytes | stored points | map points | overlap factor | mean bytes per file |",
+            "|---|---:|---:|---:|---:|---:|---:|",
+        ]
+        lines += [
+            f"| {r['name']} | {r['files']:,} | {r['bytes']:,} | {r['stored_points']:,} | {r['map_points']:,} "
+            f"| {r['overlap_factor']:.3f} | {r['mean_bytes_per_file']:,.0f} |"
+            for r in rows
+        ]
     return lines
 
 
