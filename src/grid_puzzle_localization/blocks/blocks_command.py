@@ -7,6 +7,7 @@ import argparse
 import sys
 
 from grid_puzzle_localization.blocks.builder import BlockConfig, build_blocks, union_points
+from grid_puzzle_localization.blocks.map_scans import DEFAULT_SCAN_RADIUS
 from grid_puzzle_localization.blocks.poses import parse_extrinsic, read_tum
 from grid_puzzle_localization.blocks.store import write_block_dir
 from grid_puzzle_localization.errors import UserError
@@ -29,7 +30,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--map", help="prior map PCD: keyframes are its points within --scan-radius of the --trajectory poses"
     )
     source.add_argument(
-        "--scan-radius", type=float, default=30.0, help="pseudo-scan range for --map [m] (default: %(default)s)"
+        "--scan-radius",
+        type=float,
+        default=DEFAULT_SCAN_RADIUS,
+        help="pseudo-scan range for --map [m] (default: %(default)s)",
     )
     parser.add_argument(
         "--extrinsic",

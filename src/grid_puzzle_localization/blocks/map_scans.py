@@ -12,6 +12,8 @@ from scipy.spatial import cKDTree
 from grid_puzzle_localization.blocks.keyframes import Scan
 from grid_puzzle_localization.blocks.poses import Trajectory
 
+DEFAULT_SCAN_RADIUS = 30.0  # [m] pseudo-scan range
+
 
 def map_scans(points: np.ndarray, trajectory: Trajectory, radius: float) -> Iterator[Scan]:
     """One scan per trajectory pose; its points (loaded for keyframes only) are the map points
