@@ -120,7 +120,7 @@ def test_report_markdown_and_plots_parse(experiment):
     assert "| Memory change | -140.0 MiB (-46.7 %) | -55.0 MB (-33.1 %) | -316.3 MB (-62.1 %) |" in report
     assert "| Trajectory RMSE, grid puzzle vs global [m] | 0.0300 | 0.0433 | 0.0677 |" in report
     assert "| Tile files | 250 | 8,282 | 47,480 |" in report
-    assert "| tiles | 250 | 1,075,000 | 1,000,000 | 75,000 | 25,000 |" in report
+    assert "| grid puzzle tiles | 250 | 1,075,000 | 1,000,000 | 75,000 | 25,000 | – | – |" in report
     for name in ("cpu", "memory", "trajectories", "errors"):
         assert f"(plots/{name}.png)" in report
         image = imread(experiment / "plots" / f"{name}.png")

@@ -39,5 +39,4 @@ def test_tiles_storage_conserves_data_bytes(tmp_path):
     assert tiles["data_bytes"] == fig["global_map"]["data_bytes"] == 20000 * 16
     assert tiles["data_overhead_bytes"] == 0 and tiles["points_tiles"] == 20000
     assert tiles["bytes"] == sum(f.stat().st_size for f in files) == tiles["data_bytes"] + tiles["header_bytes"]
-    rows = {r["name"]: r for r in fig["representations"]}
-    assert rows["grid puzzle tiles"]["overlap_factor"] == 1.0 and rows["grid puzzle tiles"]["files"] == 100
+    assert tiles["overlap_factor"] == 1.0 and tiles["mean_bytes_per_file"] == tiles["bytes"] / 100
