@@ -44,9 +44,12 @@ bench-provider: build
 .PHONY: bench-ndt tsan
 
 # Builds bench/bench_ndt.cpp in the catkin workspace and prints one JSON line per configuration.
-bench-ndt: build
-	$(SETUP) cd $(ROOT)/.catkin_ws && catkin_make -j2 bench_ndt >/dev/null
-	$(SETUP) $(ROOT)/.catkin_ws/devel/lib/grid_puzzle_localization/bench_ndt
+# Build output goes to .catkin_ws/bench_ndt_build.log so stdout holds only the JSON lines.
+bench-ndt: setup
+	@log=$(ROOT)/.catkin_ws/bench_ndt_build.log; mkdir -p $(ROOT)/.catkin_ws; \
+	  { bash $(ROOT)/tools/build.sh && $(SETUP) cd $(ROOT)/.catkin_ws && catkin_make -j2 bench_ndt; } >$$log 2>&1 \
+	  || { tail -40 $$log; exit 1; }
+	@$(SETUP) $(ROOT)/.catkin_ws/devel/lib/grid_puzzle_localization/bench_ndt
 
 # ThreadSanitizer run of the snapshot/background-update test in its own plain CMake build dir.
 tsan: setup
@@ -56,7 +59,10 @@ tsan: setup
 
 # ---------------------------------------------------------------- NDT localizer (issue 4)
 .PHONY: bench-localizer tsan-localizer
-bench-localizer: build
+# Build output goes to .catkin_ws/bench_localizer_build.log so stdout holds only the JSON lines.
+bench-localizer: setup
+	@log=$(ROOT)/.catkin_ws/bench_localizer_build.log; mkdir -p $(ROOT)/.catkin_ws; \
+	  bash $(ROOT)/tools/build.sh >$$log 2>&1 || { tail -40 $$log; exit 1; }
 	@$(SETUP) python3 $(ROOT)/bench/bench_localizer.py
 
 # ThreadSanitizer build of the ROS-free localizer core (update worker, NDT target, localizer) and its

@@ -150,7 +150,7 @@ class Evaluator {
     const Eigen::Matrix3f R = rd.R.cast<float>();
     const Eigen::Vector3f t = p.head<3>().cast<float>();
     const int n_chunks = static_cast<int>(chunks_.size());
-#pragma omp parallel for num_threads(threads_) schedule(static)
+#pragma omp parallel for num_threads(threads_) schedule(dynamic, 1)
     for (int c = 0; c < n_chunks; ++c) {
       const std::size_t lo = static_cast<std::size_t>(c) * kChunk;
       const std::size_t hi = std::min(points_.size(), lo + kChunk);
@@ -177,7 +177,7 @@ class Evaluator {
     std::vector<double> best_sum(n_chunks, 0.0);
     std::vector<std::size_t> matched(n_chunks, 0), inliers(n_chunks, 0);
     std::vector<std::vector<const VoxelGaussian*>> used(n_chunks);
-#pragma omp parallel for num_threads(threads_) schedule(static)
+#pragma omp parallel for num_threads(threads_) schedule(dynamic, 1)
     for (int c = 0; c < n_chunks; ++c) {
       const std::size_t lo = static_cast<std::size_t>(c) * kChunk;
       const std::size_t hi = std::min(points_.size(), lo + kChunk);

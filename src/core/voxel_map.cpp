@@ -13,6 +13,11 @@ namespace {
 
 using Delta = std::vector<std::pair<VoxelKey, VoxelStats>>;
 
+// Below these sizes a tile update runs on the calling thread: waking an OpenMP team costs more than the work (and
+// on a loaded machine waiting for a descheduled team thread costs milliseconds).
+constexpr std::size_t kMinParallelPoints = 20000;
+constexpr std::size_t kMinParallelShards = 64;
+
 std::size_t capacityFor(std::size_t n) {
   std::size_t cap = 4;
   while (cap < 2 * n) cap *= 2;
@@ -135,8 +140,8 @@ VoxelGaussian deriveGaussian(const VoxelKey& key, const VoxelStats& st, const Vo
 }
 
 std::vector<std::pair<VoxelKey, VoxelStats>> voxelStatistics(const PointCloud& points, double resolution, int threads) {
-  const int nt = resolveThreads(threads);
   const std::size_t n = points.size();
+  const int nt = n < kMinParallelPoints ? 1 : resolveThreads(threads);
   const double inv = 1.0 / resolution;
   std::vector<VoxelKey> keys(n);
   std::vector<std::uint32_t> shard(n);
@@ -282,7 +287,7 @@ void NdtTarget::apply(const Delta& delta, bool subtract) {
     b = e;
   }
   std::vector<std::int64_t> d_vox(ranges.size(), 0), d_gauss(ranges.size(), 0), d_pts(ranges.size(), 0);
-  const int nt = resolveThreads(params_.threads);
+  const int nt = ranges.size() < kMinParallelShards ? 1 : resolveThreads(params_.threads);
   bool missing = false;
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 4) reduction(|| : missing)
   for (std::size_t r = 0; r < ranges.size(); ++r) {

@@ -30,8 +30,9 @@ class CheckedLoader {
     if (!pnh_.getParam(name, value)) return;
     const T fallback = field;
     field = value;
-    const std::string problem = config_.validate();
+    std::string problem = config_.validate();
     if (problem.empty()) return;
+    while (!problem.empty() && (problem.back() == ' ' || problem.back() == ';')) problem.pop_back();
     field = fallback;
     ROS_WARN("%s: parameter ~%s = %s is out of range (%s); using the default %s instead", log_name_.c_str(),
              name.c_str(), text(value).c_str(), problem.c_str(), text(fallback).c_str());

@@ -139,6 +139,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   }
 
   void onPoints(const sensor_msgs::PointCloud2::ConstPtr& msg) {
+    for (const std::string& err : localizer_->map().takeErrors()) NODELET_ERROR("map update failed: %s", err.c_str());
     const std::optional<Eigen::Isometry3d> base_T_sensor = staticTransform(msg->header.frame_id);
     if (!base_T_sensor) return;
     PointCloud scan;
@@ -149,7 +150,6 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       return;
     }
     const LocalizerOutput out = localizer_->processScan(msg->header.stamp.toSec(), scan, *base_T_sensor);
-    for (const std::string& err : localizer_->map().takeErrors()) NODELET_ERROR("map update failed: %s", err.c_str());
     if (out.reset) NODELET_WARN("scan time went backwards (bag loop?): localizer reset");
     reportState(out.state);
     if (out.state != LocalizerState::kTracking) return;

@@ -14,7 +14,7 @@ def scenario_dir(tmp_path, bags=("scenario.bag",), gt=True):
     (tmp_path / "global_map.pcd").write_bytes(b"")
     if gt:
         (tmp_path / "ground_truth.tum").write_text("1.0 0 0 0 0 0 0 1\n")
-    (tmp_path / "scenario.yaml").write_text("world: courtyard\nseed: 3\n")
+    (tmp_path / "scenario.yaml").write_text("parameters:\n  world: courtyard\n  seed: 3\n")
     return tmp_path
 
 

@@ -2,6 +2,8 @@
 every file it writes parses."""
 
 import json
+import os
+import stat
 
 import numpy as np
 import pytest
@@ -136,3 +138,12 @@ def test_gpm_report_prints_the_table(experiment, capsys):
 def test_report_of_a_directory_without_run_json_is_a_user_error(tmp_path, capsys):
     assert main(["report", str(tmp_path)]) == 2
     assert "run.json" in capsys.readouterr().err
+
+
+def test_written_files_get_the_umask_mode(experiment):
+    # Not the owner-only mode of the temporary file they were written to.
+    umask = os.umask(0)
+    os.umask(umask)
+    build_report(experiment)
+    for path in [experiment / "summary.json", experiment / "report.md", experiment / "plots" / "cpu.png"]:
+        assert stat.S_IMODE(path.stat().st_mode) == 0o666 & ~umask, path

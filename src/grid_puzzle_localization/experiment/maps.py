@@ -27,6 +27,7 @@ def ensure_tiles(global_map: str | os.PathLike, tile_dir: str | os.PathLike, gri
         if newest_tile < Path(global_map).stat().st_mtime:
             raise UserError(f"{tile_dir} is older than {global_map}: remove it so the tiles are cut again")
         return tile_dir
+    tile_dir.parent.mkdir(parents=True, exist_ok=True)
     print(f"gpm experiment: cutting {global_map} into {grid_size_m} m tiles in {tile_dir}")
     tile_map([global_map], tile_dir, TileConfig(grid_size=grid_size_m, progress=False, force=True))
     return tile_dir
