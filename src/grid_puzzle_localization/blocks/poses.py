@@ -16,6 +16,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.evaluation import trajectory as evaluation_trajectory
 
 
 def pose_matrix(translation: np.ndarray, quaternion_xyzw: np.ndarray) -> np.ndarray:
@@ -74,35 +75,11 @@ class Trajectory:
 
 
 def read_tum(path: str | os.PathLike) -> Trajectory:
-    """Reads a TUM trajectory; raises UserError naming the file and line on bad content."""
-    rows = []
-    try:
-        with open(path, encoding="utf-8") as f:
-            for number, line in enumerate(f, 1):
-                text = line.split("#", 1)[0].strip()
-                if not text:
-                    continue
-                fields = text.split()
-                try:
-                    row = [float(v) for v in fields]
-                except ValueError:
-                    row = []
-                if len(row) != 8 or not all(math.isfinite(v) for v in row):
-                    raise UserError(
-                        f"{path}:{number}: expected 8 numbers 'stamp tx ty tz qx qy qz qw' (TUM format), got '{text}'"
-                    )
-                rows.append(row)
-    except OSError as err:
-        raise UserError(f"cannot read trajectory {path}: {err.strerror}; give an existing TUM file") from err
-    if not rows:
+    """Reads a TUM trajectory (parsed and checked by the evaluation's reader) for interpolation."""
+    traj = evaluation_trajectory.read_tum(path)
+    if not len(traj):
         raise UserError(f"trajectory {path} holds no poses; give a TUM file with at least one line")
-    data = np.array(rows, dtype=np.float64)
-    if np.any(np.diff(data[:, 0]) <= 0.0):
-        raise UserError(f"trajectory {path}: stamps must be strictly increasing; sort it and remove duplicates")
-    norms = np.linalg.norm(data[:, 4:8], axis=1)
-    if np.any(norms == 0.0):
-        raise UserError(f"trajectory {path}: a quaternion is all zeros (line {int(np.argmin(norms)) + 1} of the poses)")
-    return Trajectory(data[:, 0], data[:, 1:4], Rotation.from_quat(data[:, 4:8]))
+    return Trajectory(traj.t, traj.xyz, Rotation.from_quat(traj.quat))
 
 
 def transform_points(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
