@@ -27,7 +27,7 @@ format: setup
 	$(ROOT)/.venv/bin/ruff format $(PY_SOURCES)
 
 demo: build
-	@echo "make demo: not yet implemented (the experiment runner lands with issue 6)"
+	@$(SETUP) bash $(ROOT)/tools/demo.sh
 
 clean:
 	rm -rf $(ROOT)/.catkin_ws $(ROOT)/test_results
@@ -36,3 +36,54 @@ clean:
 .PHONY: bench-tiling
 bench-tiling: build
 	@$(SETUP) python3 $(ROOT)/bench/bench_tiling.py
+# ---------------------------------------------------------------- tile provider benchmark (issue 5)
+.PHONY: bench-provider
+bench-provider: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_provider.py
+# ---------------------------------------------------------------- NDT scan matcher (issue 3)
+.PHONY: bench-ndt tsan
+
+# Builds bench/bench_ndt.cpp in the catkin workspace and prints one JSON line per configuration.
+# Build output goes to .catkin_ws/bench_ndt_build.log so stdout holds only the JSON lines.
+bench-ndt: setup
+	@log=$(ROOT)/.catkin_ws/bench_ndt_build.log; mkdir -p $(ROOT)/.catkin_ws; \
+	  { bash $(ROOT)/tools/build.sh && $(SETUP) cd $(ROOT)/.catkin_ws && catkin_make -j2 bench_ndt; } >$$log 2>&1 \
+	  || { tail -40 $$log; exit 1; }
+	@$(SETUP) $(ROOT)/.catkin_ws/devel/lib/grid_puzzle_localization/bench_ndt
+
+# ThreadSanitizer run of the snapshot/background-update test in its own plain CMake build dir.
+tsan: setup
+	cmake -S $(ROOT)/test/tsan -B $(ROOT)/.catkin_ws/build_tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+	cmake --build $(ROOT)/.catkin_ws/build_tsan -j2
+	TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(ROOT)/.catkin_ws/build_tsan/test_ndt_concurrency_tsan
+
+# ---------------------------------------------------------------- NDT localizer (issue 4)
+.PHONY: bench-localizer tsan-localizer
+# Build output goes to .catkin_ws/bench_localizer_build.log so stdout holds only the JSON lines.
+bench-localizer: setup
+	@log=$(ROOT)/.catkin_ws/bench_localizer_build.log; mkdir -p $(ROOT)/.catkin_ws; \
+	  bash $(ROOT)/tools/build.sh >$$log 2>&1 || { tail -40 $$log; exit 1; }
+	@$(SETUP) python3 $(ROOT)/bench/bench_localizer.py
+
+# ThreadSanitizer build of the ROS-free localizer core (update worker, NDT target, localizer) and its
+# gtests in a separate build tree (see test/tsan_localizer); roscpp itself is not instrumented.
+tsan-localizer: setup
+	cmake -S $(ROOT)/test/tsan_localizer -B $(ROOT)/.catkin_ws/build_tsan_localizer -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+	cmake --build $(ROOT)/.catkin_ws/build_tsan_localizer -j2
+	cd $(ROOT) && TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(ROOT)/.catkin_ws/build_tsan_localizer/tsan_localizer_tests
+# --- scenario simulator (gpm simulate) ---
+.PHONY: bench-sim
+bench-sim: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_sim.py
+# ---------------------------------------------------------------- block maps (issue 8)
+.PHONY: bench-blocks
+bench-blocks: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_blocks.py --repeats 3
+# ---------------------------------------------------------------- monitor and experiment (issue 6)
+.PHONY: bench-monitor experiment-paper
+
+bench-monitor: build
+	@$(SETUP) python3 $(ROOT)/bench/bench_monitor.py
+
+experiment-paper: build
+	@$(SETUP) bash $(ROOT)/tools/experiment_paper.sh

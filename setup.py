@@ -1,4 +1,4 @@
 from catkin_pkg.python_setup import generate_distutils_setup
-from setuptools import setup
+from setuptools import find_packages, setup
 
-setup(**generate_distutils_setup(packages=["grid_puzzle_localization", "grid_puzzle_localization.pcd", "grid_puzzle_localization.ros", "grid_puzzle_localization.tiling"], package_dir={"": "src"}))
+setup(**generate_distutils_setup(packages=find_packages("src"), package_dir={"": "src"}))

@@ -1,0 +1,254 @@
+// Replays a synthetic drive through the core Localizer at the scan rate, with the map following the
+// vehicle as a window of tiles, and prints one JSON line: per-scan latency percentiles, the worst latency
+// while a target update was pending, target update times and peak RSS. No ROS.
+//
+// Usage: bench_localizer INPUT.bin cloud|tiles [--tile-size S] [--window N] [--threads T] [--resolution R]
+//                        [--max-range M]
+// INPUT.bin (little endian) is written by bench/bench_localizer.py:
+//   char[8] "GPLBENCH"; f64 rate_hz; u64 n_map; f32 map[n_map][3]; f64 base_T_sensor[16] (row-major);
+//   u64 n_scans; then per scan: f64 stamp; f64 truth[16] (map_T_base, row-major); u64 n; f32 points[n][3]
+#include <sys/resource.h>
+#include <time.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <set>
+#include <stdexcept>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "grid_puzzle_localization/localizer.hpp"
+
+namespace gpl = grid_puzzle_localization;
+
+namespace {
+
+struct Scan {
+  double stamp = 0.0;
+  Eigen::Isometry3d truth = Eigen::Isometry3d::Identity();
+  gpl::PointCloud points;
+};
+
+struct Input {
+  double rate_hz = 10.0;
+  gpl::PointCloud map;
+  Eigen::Isometry3d base_T_sensor = Eigen::Isometry3d::Identity();
+  std::vector<Scan> scans;
+};
+
+template <class T>
+T readValue(std::ifstream& in) {
+  T v;
+  in.read(reinterpret_cast<char*>(&v), sizeof v);
+  if (!in) throw std::runtime_error("input file is truncated");
+  return v;
+}
+
+gpl::PointCloud readCloud(std::ifstream& in) {
+  const auto n = readValue<std::uint64_t>(in);
+  gpl::PointCloud cloud(n);
+  in.read(reinterpret_cast<char*>(cloud.data()), static_cast<std::streamsize>(n * 3 * sizeof(float)));
+  if (!in) throw std::runtime_error("input file is truncated");
+  return cloud;
+}
+
+Eigen::Isometry3d readPose(std::ifstream& in) {
+  Eigen::Matrix4d m;
+  for (int r = 0; r < 4; ++r)
+    for (int c = 0; c < 4; ++c) m(r, c) = readValue<double>(in);
+  return Eigen::Isometry3d(m);
+}
+
+Input readInput(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw std::runtime_error("cannot open " + path);
+  char magic[8];
+  in.read(magic, 8);
+  if (!in || std::memcmp(magic, "GPLBENCH", 8) != 0) throw std::runtime_error(path + " is not a bench input file");
+  Input input;
+  input.rate_hz = readValue<double>(in);
+  input.map = readCloud(in);
+  input.base_T_sensor = readPose(in);
+  const auto n = readValue<std::uint64_t>(in);
+  input.scans.resize(n);
+  for (Scan& s : input.scans) {
+    s.stamp = readValue<double>(in);
+    s.truth = readPose(in);
+    s.points = readCloud(in);
+  }
+  return input;
+}
+
+using TileKey = std::pair<int, int>;
+
+std::string tileId(const TileKey& k) { return std::to_string(k.first) + "_" + std::to_string(k.second); }
+
+std::map<TileKey, gpl::PointCloud> cutTiles(const gpl::PointCloud& map, double s) {
+  std::map<TileKey, gpl::PointCloud> tiles;
+  for (const gpl::Point& p : map)
+    tiles[{static_cast<int>(std::floor(p.x() / s)), static_cast<int>(std::floor(p.y() / s))}].push_back(p);
+  return tiles;
+}
+
+std::set<TileKey> window(const std::map<TileKey, gpl::PointCloud>& tiles, const Eigen::Vector3d& at, double s, int n) {
+  const int ci = static_cast<int>(std::floor(at.x() / s));
+  const int cj = static_cast<int>(std::floor(at.y() / s));
+  std::set<TileKey> w;
+  for (int i = ci - n; i <= ci + n; ++i)
+    for (int j = cj - n; j <= cj + n; ++j)
+      if (tiles.count({i, j})) w.insert({i, j});
+  return w;
+}
+
+// CPU time of the calling thread [ms]: the scan's own work, without the time other processes took the core.
+double threadCpuMs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
+}
+
+double percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const double pos = q * static_cast<double>(v.size() - 1);
+  const auto lo = static_cast<std::size_t>(std::floor(pos));
+  const auto hi = std::min(lo + 1, v.size() - 1);
+  return v[lo] + (pos - static_cast<double>(lo)) * (v[hi] - v[lo]);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 3) {
+    std::fprintf(
+        stderr,
+        "usage: %s INPUT.bin cloud|tiles [--tile-size S] [--window N] [--threads T] [--resolution R] [--max-range M]\n",
+        argv[0]);
+    return 2;
+  }
+  const std::string mode = argv[2];
+  if (mode != "cloud" && mode != "tiles") {
+    std::fprintf(stderr, "bench_localizer: mode must be cloud or tiles (got '%s')\n", mode.c_str());
+    return 2;
+  }
+  double tile_size = 10.0;
+  int half_window = 3;
+  int threads = -1;  // -1: the LocalizerConfig default
+  gpl::LocalizerConfig config;
+  for (int i = 3; i + 1 < argc; i += 2) {
+    const std::string opt = argv[i];
+    if (opt == "--tile-size")
+      tile_size = std::stod(argv[i + 1]);
+    else if (opt == "--window")
+      half_window = std::stoi(argv[i + 1]);
+    else if (opt == "--threads")
+      threads = std::stoi(argv[i + 1]);
+    else if (opt == "--resolution")
+      config.ndt.resolution = std::stod(argv[i + 1]);
+    else if (opt == "--max-range")
+      config.preprocess.max_range = std::stod(argv[i + 1]);
+    else {
+      std::fprintf(stderr, "bench_localizer: unknown option %s\n", opt.c_str());
+      return 2;
+    }
+  }
+  Input input;
+  try {
+    input = readInput(argv[1]);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_localizer: %s\n", e.what());
+    return 2;
+  }
+
+  if (threads >= 0) config.ndt.threads = threads;
+  gpl::Localizer loc(config);
+  const auto tiles = cutTiles(input.map, tile_size);
+
+  // The map follows the localizer's own pose, as the tile provider follows odom. cloud mode gets the
+  // merged window as one cloud (a full rebuild per change), tiles mode gets the delta.
+  std::set<TileKey> loaded;
+  std::size_t updates = 0;
+  auto follow = [&](const Eigen::Vector3d& at) {
+    const std::set<TileKey> want = window(tiles, at, tile_size, half_window);
+    if (want == loaded) return;
+    if (mode == "cloud") {
+      gpl::PointCloud merged;
+      for (const TileKey& k : want) merged.insert(merged.end(), tiles.at(k).begin(), tiles.at(k).end());
+      loc.map().submit(gpl::MapChange::fullCloud(std::move(merged)));
+    } else {
+      std::vector<gpl::TileCloud> added;
+      std::vector<std::string> removed;
+      for (const TileKey& k : want)
+        if (!loaded.count(k)) added.push_back({tileId(k), tiles.at(k)});
+      for (const TileKey& k : loaded)
+        if (!want.count(k)) removed.push_back(tileId(k));
+      loc.map().submit(gpl::MapChange::tiles(loaded.empty(), std::move(added), std::move(removed)));
+    }
+    loaded = want;
+    ++updates;
+  };
+
+  follow(input.scans.front().truth.translation());
+  loc.map().waitIdle();
+  loc.setInitialPose(input.scans.front().truth);
+
+  std::vector<double> latency, latency_pending, latency_quiet, cpu, update_ms, errors;
+  double first_scan_ms = 0.0;
+  std::size_t rejected = 0;
+  std::uint64_t generation = loc.map().stats().generation;
+  const auto period = std::chrono::duration<double>(1.0 / input.rate_hz);
+  auto next = std::chrono::steady_clock::now();
+  for (const Scan& scan : input.scans) {
+    std::this_thread::sleep_until(next);
+    next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
+    const double cpu_start = threadCpuMs();
+    const gpl::LocalizerOutput out = loc.processScan(scan.stamp, scan.points, input.base_T_sensor);
+    const double cpu_ms = threadCpuMs() - cpu_start;
+    // The first scan swaps in the initial map and converges from the initial pose: reported on its own.
+    if (&scan == &input.scans.front()) {
+      first_scan_ms = out.scan_ms;
+    } else {
+      cpu.push_back(cpu_ms);
+      latency.push_back(out.scan_ms);
+      (out.map_update_pending || out.map_swapped ? latency_pending : latency_quiet).push_back(out.scan_ms);
+    }
+    if (!out.match_accepted) ++rejected;
+    errors.push_back((out.pose.translation() - scan.truth.translation()).norm());
+    const gpl::MapUpdateStats stats = loc.map().stats();
+    if (stats.generation != generation) {
+      generation = stats.generation;
+      update_ms.push_back(stats.update_ms);
+    }
+    follow(out.pose.translation());
+  }
+  loc.map().waitIdle();
+  if (loc.map().stats().generation != generation) update_ms.push_back(loc.map().stats().update_ms);
+
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  double mean_error = 0.0;
+  for (double e : errors) mean_error += e / static_cast<double>(errors.size());
+  std::printf(
+      "{\"mode\": \"%s\", \"scans\": %zu, \"first_scan_ms\": %.2f, \"latency_ms\": {\"p50\": %.2f, \"p95\": %.2f, "
+      "\"p99\": %.2f, \"max\": "
+      "%.2f}, "
+      "\"worst_latency_during_update_ms\": %.2f, \"scans_during_update\": %zu, \"p50_latency_during_update_ms\": %.2f, "
+      "\"p99_latency_without_update_ms\": %.2f, \"scan_thread_cpu_ms\": {\"p50\": %.2f, \"p99\": %.2f}, "
+      "\"target_updates\": %zu, "
+      "\"target_update_ms\": {\"median\": %.1f, \"max\": %.1f}, \"rejected_matches\": %zu, "
+      "\"translation_error_m\": {\"mean\": %.4f, \"max\": %.4f}, \"map_points\": %zu, \"tile_size_m\": %.1f, "
+      "\"window_tiles\": %d, \"ndt_threads\": %d, \"map_update_threads\": %d, \"peak_rss_mb\": %.1f}\n",
+      mode.c_str(), input.scans.size(), first_scan_ms, percentile(latency, 0.5), percentile(latency, 0.95),
+      percentile(latency, 0.99), percentile(latency, 1.0), percentile(latency_pending, 1.0), latency_pending.size(),
+      percentile(latency_pending, 0.5), percentile(latency_quiet, 0.99), percentile(cpu, 0.5), percentile(cpu, 0.99),
+      updates, percentile(update_ms, 0.5), percentile(update_ms, 1.0), rejected, mean_error, percentile(errors, 1.0),
+      input.map.size(), tile_size, (2 * half_window + 1) * (2 * half_window + 1), config.ndt.threads,
+      config.map_update_threads, static_cast<double>(usage.ru_maxrss) / 1024.0);
+  return 0;
+}

@@ -1,0 +1,71 @@
+"""`make bench-localizer`: a synthetic drive (grid_puzzle_localization.synthetic_scene) through the core
+localizer without roscore. Writes the scans and the map to a temporary input file, runs the C++
+bench_localizer once per map mode (cloud: the merged window rebuilt per change; tiles: incremental deltas)
+and prints one JSON line per mode, with the machine it ran on."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from grid_puzzle_localization import synthetic_scene as ss
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def cpu_model() -> str:
+    for line in Path("/proc/cpuinfo").read_text().splitlines():
+        if line.startswith("model name"):
+            return line.split(":", 1)[1].strip()
+    return platform.processor() or "unknown"
+
+
+def write_input(path: Path, drive: ss.Drive, seed: int) -> None:
+    scene = ss.make_scene()
+    rng = np.random.default_rng(seed)
+    with path.open("wb") as f:
+        f.write(b"GPLBENCH")
+        f.write(np.float64(drive.rate).tobytes())
+        cloud = ss.sample_map(scene)
+        f.write(np.uint64(len(cloud)).tobytes() + cloud.tobytes())
+        f.write(ss.lidar_mount().astype(np.float64).tobytes())
+        f.write(np.uint64(len(drive.stamps)).tobytes())
+        for t in drive.stamps:
+            pose = drive.pose(float(t))
+            points = ss.scan(scene, pose, rng)
+            f.write(np.float64(t).tobytes() + pose.astype(np.float64).tobytes())
+            f.write(np.uint64(len(points)).tobytes() + points.tobytes())
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--duration", type=float, default=15.0, help="drive length [s] at 10 Hz (default 15)")
+    parser.add_argument("--tile-size", type=float, default=10.0, help="tile side [m] (default 10)")
+    parser.add_argument("--window", type=int, default=3, help="tiles on each side of the vehicle (default 3)")
+    parser.add_argument("--threads", type=int, help="NDT OpenMP threads, 0 = all cores (default: the localizer's)")
+    workspace = Path(os.environ.get("GPL_WS", ROOT / ".catkin_ws"))
+    parser.add_argument("--exe", type=Path, default=workspace / "devel/lib/grid_puzzle_localization/bench_localizer")
+    args = parser.parse_args()
+    # Other processes compete for the cores: the load average says how much (latency tails depend on it).
+    hardware = {"cpu_model": cpu_model(), "cores": os.cpu_count(), "load_average_1min": os.getloadavg()[0]}
+    with tempfile.TemporaryDirectory() as tmp:
+        data = Path(tmp) / "drive.bin"
+        write_input(data, ss.Drive(duration=args.duration), seed=1)
+        for mode in ("cloud", "tiles"):
+            cmd = [str(args.exe), str(data), mode, "--tile-size", str(args.tile_size), "--window", str(args.window)]
+            if args.threads is not None:
+                cmd += ["--threads", str(args.threads)]
+            out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
+            print(json.dumps({**json.loads(out), **hardware}), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,108 @@
+// Point-to-distribution NDT registration (Magnusson 2009) with OpenMP. No ROS includes here.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <string>
+
+#include "grid_puzzle_localization/point_cloud.hpp"
+#include "grid_puzzle_localization/voxel_map.hpp"
+
+namespace grid_puzzle_localization {
+
+/// Which target voxels a transformed source point is scored against.
+enum class NdtSearchMethod {
+  DIRECT1,   ///< the voxel holding the point
+  DIRECT7,   ///< plus its 6 face neighbours
+  DIRECT27,  ///< the full 3x3x3 block
+  RADIUS,    ///< every voxel whose mean lies within `resolution` of the point (PCL's behaviour)
+};
+
+/// Parses "DIRECT1" | "DIRECT7" | "DIRECT27" | "RADIUS" (case-insensitive); false if unknown.
+bool parseSearchMethod(const std::string& text, NdtSearchMethod* method);
+const char* toString(NdtSearchMethod method);
+
+/// Every NDT parameter. The target-side ones (resolution, min_points_per_voxel, eigenvalue_ratio, threads) come
+/// from VoxelMapParams, so an NdtConfig can be passed to NdtTarget as is.
+struct NdtConfig : VoxelMapParams {
+  NdtSearchMethod search = NdtSearchMethod::DIRECT7;
+  double step_size = 0.1;                ///< maximum Newton step length (norm of the 6-vector, m and rad), > 0
+  double transformation_epsilon = 0.01;  ///< converged when the step length falls below this, >= 0
+  int max_iterations = 30;               ///< Newton iterations, >= 1
+  double outlier_ratio = 0.55;           ///< weight of the uniform outlier term of the mixture, (0, 1)
+  bool line_search = true;               ///< More-Thuente line search; false = fixed step min(|newton|, step_size)
+
+  /// Empty when usable, else a message naming each bad value and its allowed range (includes the map params).
+  std::string validate() const;
+};
+
+using Vector6d = Eigen::Matrix<double, 6, 1>;
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+
+enum class NdtStatus {
+  OK,                 ///< converged (step below transformation_epsilon)
+  MAX_ITERATIONS,     ///< stopped at max_iterations; the pose is the last iterate and usually still usable
+  EMPTY_TARGET,       ///< the target snapshot has no valid Gaussian
+  TOO_FEW_POINTS,     ///< the source has fewer than kMinSourcePoints finite points
+  NO_CORRESPONDENCE,  ///< no source point reached a target Gaussian at the guess
+  DEGENERATE,         ///< the match does not constrain all 6 DoF (e.g. one voxel); the pose is the guess
+  INVALID_INPUT,      ///< non-finite guess, bad config, or a snapshot built with another resolution
+};
+const char* toString(NdtStatus status);
+
+/// Result of one alignment. All fields are finite whatever the status.
+struct NdtResult {
+  Eigen::Matrix4f transform = Eigen::Matrix4f::Identity();  ///< T_target_source: maps source points into the target
+  int iterations = 0;                                       ///< Newton iterations done
+  bool converged = false;                                   ///< status == OK
+  /// NDT cost: sum over source points and their Gaussians of d1 * exp(-d2/2 * mahalanobis^2), <= 0, lower is better.
+  double score = 0.0;
+  double transformation_probability = 0.0;  ///< -score / source points (Autoware's "transformation probability")
+  double nvtl = 0.0;  ///< nearest voxel transformation likelihood: mean over matched points of the best -d1*exp(..)
+  /// Hessian of the cost w.r.t. (x, y, z, roll, pitch, yaw) at the final pose, with the pose parametrised as
+  /// T = Translation(x, y, z) * Rx(roll) * Ry(pitch) * Rz(yaw). Positive definite at a well-constrained minimum;
+  /// its inverse is a covariance estimate (up to scale) in [m, rad].
+  Matrix6d hessian = Matrix6d::Zero();
+  double inlier_fraction = 0.0;   ///< source points whose best Gaussian is within chi2(3 dof, 99%) Mahalanobis
+  std::size_t source_points = 0;  ///< finite source points used
+  NdtStatus status = NdtStatus::INVALID_INPUT;
+  std::string message;  ///< empty when OK, else what went wrong and what to do
+};
+
+/// Pose parameters (x, y, z [m], roll, pitch, yaw [rad]) <-> T = Translation * Rx(roll) * Ry(pitch) * Rz(yaw).
+Eigen::Matrix4d poseToMatrix(const Vector6d& pose);
+Vector6d matrixToPose(const Eigen::Matrix4d& transform);
+
+/// The NDT cost at a pose and its analytic derivatives w.r.t. the pose parameters.
+struct NdtDerivatives {
+  double cost = 0.0;
+  Vector6d gradient = Vector6d::Zero();
+  Matrix6d hessian = Matrix6d::Zero();
+};
+
+/// Aligns source clouds against a target snapshot. Stateless apart from its config: align() is const and may
+/// run concurrently from several threads (each call uses its own OpenMP team).
+class NdtAligner {
+ public:
+  static constexpr std::size_t kMinSourcePoints = 6;
+
+  /// Throws std::invalid_argument when config.validate() is not empty.
+  explicit NdtAligner(const NdtConfig& config = NdtConfig());
+  const NdtConfig& config() const { return config_; }
+
+  /// Aligns `source` (sensor frame, metres) to `target` starting at `guess` (T_target_source). The target must have
+  /// been built with this config's resolution. Never throws for bad data: see NdtResult::status.
+  NdtResult align(const VoxelMap& target, const PointCloud& source, const Eigen::Matrix4f& guess) const;
+  NdtResult align(const VoxelMap& target, const PointCloud& source, const Eigen::Isometry3f& guess) const {
+    return align(target, source, guess.matrix());
+  }
+
+  /// The cost, gradient and Hessian that align() minimises, at `pose` (finite source points only). For tests and
+  /// for a covariance at a pose found elsewhere.
+  NdtDerivatives derivatives(const VoxelMap& target, const PointCloud& source, const Vector6d& pose) const;
+
+ private:
+  NdtConfig config_;
+};
+
+}  // namespace grid_puzzle_localization

@@ -1,0 +1,34 @@
+// Pose covariance from the NDT Hessian (Laplace approximation), made safe to publish. No ROS.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Eigenvalues>
+#include <string>
+
+namespace grid_puzzle_localization {
+
+using Matrix6d = Eigen::Matrix<double, 6, 6>;
+
+struct CovarianceConfig {
+  /// Multiplies inv(H). The NDT score is a robust sum over points, not a calibrated log-likelihood,
+  /// so inv(H) alone is over-confident; the scale is the knob that calibrates it (dimensionless, > 0).
+  double scale = 1.0;
+  double min_translation_std = 0.01;  ///< [m] floor added to x y z (matching is never perfect)
+  double min_rotation_std = 0.001;    ///< [rad] floor added to roll pitch yaw
+  double max_translation_std = 10.0;  ///< [m] reported along unconstrained directions
+  double max_rotation_std = 3.14;     ///< [rad] reported along unconstrained directions
+
+  std::string validate() const;
+};
+
+/// Covariance of (x, y, z, roll, pitch, yaw) from `hessian`, the Hessian of the matching cost that is
+/// minimised (positive semi-definite at a minimum), in the same parameter order. Directions whose
+/// curvature is not positive (degenerate scene, failed match) get the max std projected on them; non-finite input gives
+/// the max-std diagonal. The result is symmetric, positive definite and finite.
+Matrix6d covarianceFromHessian(const Matrix6d& hessian, const CovarianceConfig& config);
+
+/// Covariance to report with a prediction (no accepted match): the max-std diagonal, an honest
+/// statement that the pose was not measured.
+Matrix6d predictionCovariance(const CovarianceConfig& config);
+
+}  // namespace grid_puzzle_localization

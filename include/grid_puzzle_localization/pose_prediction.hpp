@@ -1,0 +1,79 @@
+// Motion prediction between scans: a constant body-twist model, optionally with the rotation
+// integrated from gyro samples. No ROS.
+#pragma once
+
+#include <Eigen/Geometry>
+#include <deque>
+
+namespace grid_puzzle_localization {
+
+/// 6-vector twist in the body frame: (vx, vy, vz) [m/s], (wx, wy, wz) [rad/s].
+using Twist = Eigen::Matrix<double, 6, 1>;
+
+/// se(3) exponential of a body twist applied for `dt` seconds: the exact pose change of a body that
+/// moves with a constant body-frame velocity (a car on a circular arc, for example).
+Eigen::Isometry3d expTwist(const Twist& twist, double dt);
+
+/// Inverse of expTwist for dt = 1: the body twist that moves identity to `delta` in one second.
+Twist logTwist(const Eigen::Isometry3d& delta);
+
+/// Rotation accumulated from angular-velocity samples (base frame, rad/s). Samples are linearly
+/// interpolated in time (trapezoidal rule), so a rate that is linear in time about a fixed axis
+/// integrates exactly.
+class GyroIntegrator {
+ public:
+  /// Adds a sample at `stamp` [s]. Samples must arrive in time order; an older one clears the buffer
+  /// (a bag loop) and starts over.
+  void add(double stamp, const Eigen::Vector3d& angular_velocity);
+
+  /// True when samples cover [t0, t1] (the first sample at or before t0, the last at or after t1,
+  /// with a tolerance of `max_gap` [s] at each end, where the rate is held).
+  bool covers(double t0, double t1, double max_gap) const;
+
+  /// Rotation of the body from t0 to t1 (R(t0)^-1 R(t1)). Outside the sampled span the nearest rate is
+  /// held. Identity when there are no samples.
+  Eigen::Quaterniond integrate(double t0, double t1) const;
+
+  /// Drops samples that are not needed to integrate from `stamp` on.
+  void dropBefore(double stamp);
+
+  void clear() { samples_.clear(); }
+  std::size_t size() const { return samples_.size(); }
+
+ private:
+  struct Sample {
+    double stamp;
+    Eigen::Vector3d rate;
+  };
+  Eigen::Vector3d rateAt(double t) const;
+  std::deque<Sample> samples_;
+};
+
+/// Constant-velocity predictor. It holds the last pose (map frame) and the body twist estimated from
+/// the last two poses.
+class PosePredictor {
+ public:
+  /// Forgets the motion history and starts from `pose` at `stamp` [s] with zero velocity.
+  void reset(const Eigen::Isometry3d& pose, double stamp);
+
+  bool initialized() const { return initialized_; }
+  double stamp() const { return stamp_; }
+  const Eigen::Isometry3d& pose() const { return pose_; }
+  const Twist& twist() const { return twist_; }
+
+  /// Pose at `stamp` [s]: the last pose moved by the constant body twist. When `gyro_rotation` is
+  /// given it replaces the rotation part of the motion (the translation still follows the twist).
+  Eigen::Isometry3d predict(double stamp, const Eigen::Quaterniond* gyro_rotation = nullptr) const;
+
+  /// Records the estimated pose at `stamp` [s] and re-estimates the twist from the previous pose.
+  /// A non-positive time step keeps the twist.
+  void update(const Eigen::Isometry3d& pose, double stamp);
+
+ private:
+  bool initialized_ = false;
+  double stamp_ = 0.0;
+  Eigen::Isometry3d pose_ = Eigen::Isometry3d::Identity();
+  Twist twist_ = Twist::Zero();
+};
+
+}  // namespace grid_puzzle_localization

@@ -1,0 +1,187 @@
+#include "grid_puzzle_localization/localizer.hpp"
+
+#include <chrono>
+#include <sstream>
+#include <stdexcept>
+
+namespace grid_puzzle_localization {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+VoxelMapParams workerParams(const LocalizerConfig& config) {
+  VoxelMapParams p = config.ndt;
+  p.threads = config.map_update_threads;
+  return p;
+}
+
+const LocalizerConfig& validated(const LocalizerConfig& config) {
+  const std::string problem = config.validate();
+  if (!problem.empty()) throw std::invalid_argument("localizer parameters: " + problem);
+  return config;
+}
+
+// Float round-off in the NDT transform leaves the rotation slightly non-orthonormal; a quaternion
+// round trip fixes that before the pose is chained with others.
+Eigen::Isometry3d toIsometry(const Eigen::Matrix4f& m) {
+  Eigen::Isometry3d out = Eigen::Isometry3d::Identity();
+  out.translation() = m.topRightCorner<3, 1>().cast<double>();
+  out.linear() = Eigen::Quaterniond(m.topLeftCorner<3, 3>().cast<double>()).normalized().toRotationMatrix();
+  return out;
+}
+
+}  // namespace
+
+std::string LocalizerConfig::validate() const {
+  std::ostringstream err;
+  err << preprocess.validate() << ndt.validate() << covariance.validate();
+  if (!(map_update_threads >= 0)) err << "map_update_threads must be >= 0 (0 = all cores); ";
+  if (!(min_nvtl >= 0.0)) err << "min_nvtl must be >= 0 (got " << min_nvtl << "); ";
+  if (!(min_transformation_probability >= 0.0))
+    err << "min_transformation_probability must be >= 0 (got " << min_transformation_probability << "); ";
+  if (!(gyro_max_gap >= 0.0)) err << "gyro_max_gap must be >= 0 s (got " << gyro_max_gap << "); ";
+  if (!(time_jump_back > 0.0)) err << "time_jump_back must be > 0 s (got " << time_jump_back << "); ";
+  return err.str();
+}
+
+const char* toString(LocalizerState state) {
+  switch (state) {
+    case LocalizerState::kWaitingForMap:
+      return "waiting_for_map";
+    case LocalizerState::kWaitingForInitialPose:
+      return "waiting_for_initial_pose";
+    case LocalizerState::kTracking:
+      return "tracking";
+  }
+  return "unknown";
+}
+
+MatchSummary summarize(const LocalizerOutput& out, double target_update_ms) {
+  MatchSummary s;
+  s.converged = out.ndt.converged;
+  s.match_accepted = out.match_accepted;
+  s.iterations = out.ndt.iterations;
+  s.score = out.ndt.score;
+  s.transformation_probability = out.ndt.transformation_probability;
+  s.nvtl = out.ndt.nvtl;
+  s.inlier_fraction = out.ndt.inlier_fraction;
+  s.align_ms = out.align_ms;
+  s.target_update_ms = target_update_ms;
+  s.target_voxels = out.target_voxels;
+  s.target_points = out.target_points;
+  s.source_points = out.ndt.source_points;
+  s.ndt_status = toString(out.ndt.status);
+  return s;
+}
+
+Localizer::Localizer(const LocalizerConfig& config)
+    : config_(validated(config)), aligner_(config.ndt), worker_(workerParams(config)) {}
+
+void Localizer::setInitialPose(const Eigen::Isometry3d& map_T_base) { pending_initial_pose_ = map_T_base; }
+
+void Localizer::setDefaultInitialPose(const Eigen::Isometry3d& map_T_base) {
+  default_initial_pose_ = map_T_base;
+  if (!predictor_.initialized()) pending_initial_pose_ = map_T_base;
+}
+
+void Localizer::addGyro(double stamp, const Eigen::Vector3d& angular_velocity) {
+  if (angular_velocity.allFinite()) gyro_.add(stamp, angular_velocity);
+}
+
+void Localizer::reset() {
+  predictor_ = PosePredictor();
+  gyro_.clear();
+  pending_initial_pose_ = default_initial_pose_;
+  last_stamp_.reset();
+}
+
+bool Localizer::acceptable(const NdtResult& r) const {
+  if (r.status != NdtStatus::OK && r.status != NdtStatus::MAX_ITERATIONS) return false;
+  if (config_.require_converged && !r.converged) return false;
+  if (r.nvtl < config_.min_nvtl) return false;
+  if (r.transformation_probability < config_.min_transformation_probability) return false;
+  return r.transform.allFinite();
+}
+
+LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, const Eigen::Isometry3d& base_T_sensor) {
+  const Clock::time_point start = Clock::now();
+  LocalizerOutput out;
+  if (last_stamp_ && stamp < *last_stamp_ - config_.time_jump_back) {
+    reset();
+    out.reset = true;
+  }
+  last_stamp_ = stamp;
+  out.map_update_pending = worker_.busy();
+  if (std::shared_ptr<const VoxelMap> next = worker_.takeReady()) {
+    target_ = std::move(next);
+    out.map_swapped = true;
+  }
+  if (target_) {
+    out.target_voxels = target_->gaussianCount();
+    out.target_points = target_->pointCount();
+  }
+  if (!target_ || target_->gaussianCount() == 0) {
+    out.state = LocalizerState::kWaitingForMap;
+    out.scan_ms = msSince(start);
+    return out;
+  }
+  const bool fresh = pending_initial_pose_.has_value();
+  if (fresh) {
+    predictor_.reset(*pending_initial_pose_, stamp);
+    pending_initial_pose_.reset();
+  }
+  if (!predictor_.initialized()) {
+    out.state = LocalizerState::kWaitingForInitialPose;
+    out.scan_ms = msSince(start);
+    return out;
+  }
+  out.state = LocalizerState::kTracking;
+
+  PointCloud source = preprocess(scan, config_.preprocess, &out.preprocess);
+  const Eigen::Isometry3f base_T_sensor_f = base_T_sensor.cast<float>();
+  for (Point& p : source) p = base_T_sensor_f * p;
+
+  Eigen::Isometry3d guess = predictor_.pose();
+  if (!fresh) {
+    std::optional<Eigen::Quaterniond> gyro_rotation;
+    if (config_.use_gyro && gyro_.covers(predictor_.stamp(), stamp, config_.gyro_max_gap))
+      gyro_rotation = gyro_.integrate(predictor_.stamp(), stamp);
+    guess = predictor_.predict(stamp, gyro_rotation ? &*gyro_rotation : nullptr);
+  }
+
+  const Clock::time_point align_start = Clock::now();
+  out.ndt = aligner_.align(*target_, source, guess.cast<float>());
+  out.align_ms = msSince(align_start);
+
+  out.match_accepted = acceptable(out.ndt);
+  out.pose = out.match_accepted ? toIsometry(out.ndt.transform) : guess;
+  if (!out.pose.matrix().allFinite()) {
+    out.pose = guess;
+    out.match_accepted = false;
+  }
+  const double dt = stamp - predictor_.stamp();
+  // After a new initial pose the first match may move far from it: that jump is a correction, not motion.
+  if (fresh)
+    predictor_.reset(out.pose, stamp);
+  else
+    predictor_.update(out.pose, stamp);
+  gyro_.dropBefore(stamp);
+  out.twist = predictor_.twist();
+  out.covariance = out.match_accepted ? covarianceFromHessian(out.ndt.hessian, config_.covariance)
+                                      : predictionCovariance(config_.covariance);
+  out.twist_covariance = out.match_accepted && !fresh && dt > 0.0 ? out.covariance * (2.0 / (dt * dt))
+                                                                  : predictionCovariance(config_.covariance);
+  if (config_.output_aligned) {
+    const Eigen::Isometry3f map_T_base = out.pose.cast<float>();
+    out.aligned.reserve(source.size());
+    for (const Point& p : source) out.aligned.push_back(map_T_base * p);
+  }
+  out.scan_ms = msSince(start);
+  return out;
+}
+
+}  // namespace grid_puzzle_localization

@@ -1,0 +1,366 @@
+#include "grid_puzzle_localization/voxel_map.hpp"
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+#include "omp_threads.hpp"
+
+namespace grid_puzzle_localization {
+namespace {
+
+using Delta = std::vector<std::pair<VoxelKey, VoxelStats>>;
+
+// Below these sizes a tile update runs on the calling thread: waking an OpenMP team costs more than the work (and
+// on a loaded machine waiting for a descheduled team thread costs milliseconds).
+constexpr std::size_t kMinParallelPoints = 20000;
+constexpr std::size_t kMinParallelShards = 64;
+
+std::size_t capacityFor(std::size_t n) {
+  std::size_t cap = 4;
+  while (cap < 2 * n) cap *= 2;
+  return cap;
+}
+
+void rebuildSlots(VoxelMap::Shard& shard) {
+  shard.slots.assign(capacityFor(shard.keys.size()), VoxelMap::Shard::Slot());
+  const std::size_t mask = shard.slots.size() - 1;
+  for (std::size_t i = 0; i < shard.keys.size(); ++i) {
+    std::size_t s = VoxelMap::hash(shard.keys[i]) & mask;
+    while (shard.slots[s].index >= 0) s = (s + 1) & mask;
+    shard.slots[s] = {shard.keys[i], static_cast<std::int32_t>(i)};
+  }
+}
+
+}  // namespace
+
+std::string VoxelMapParams::validate() const {
+  std::ostringstream err;
+  if (!(resolution > 0.0 && std::isfinite(resolution))) err << "resolution must be > 0 m (got " << resolution << "); ";
+  if (min_points_per_voxel < 3)
+    err << "min_points_per_voxel must be >= 3 so a covariance exists (got " << min_points_per_voxel << "); ";
+  if (!(eigenvalue_ratio > 0.0 && eigenvalue_ratio <= 1.0))
+    err << "eigenvalue_ratio must be in (0, 1] (got " << eigenvalue_ratio << "); ";
+  if (threads < 0) err << "threads must be >= 0, 0 = all cores (got " << threads << "); ";
+  return err.str();
+}
+
+void VoxelStats::add(const Eigen::Vector3d& l) {
+  ++count;
+  sum += l;
+  sum_sq[0] += l.x() * l.x();
+  sum_sq[1] += l.x() * l.y();
+  sum_sq[2] += l.x() * l.z();
+  sum_sq[3] += l.y() * l.y();
+  sum_sq[4] += l.y() * l.z();
+  sum_sq[5] += l.z() * l.z();
+}
+
+void VoxelStats::merge(const VoxelStats& o) {
+  count += o.count;
+  sum += o.sum;
+  for (int i = 0; i < 6; ++i) sum_sq[i] += o.sum_sq[i];
+}
+
+void VoxelStats::subtract(const VoxelStats& o) {
+  count -= o.count;
+  sum -= o.sum;
+  for (int i = 0; i < 6; ++i) sum_sq[i] -= o.sum_sq[i];
+}
+
+namespace {
+const VoxelMap::Shard::Slot kEmptySlot{};  // index -1: every probe of an empty shard ends here
+}  // namespace
+
+VoxelMap::VoxelMap(const VoxelMapParams& params) : params_(params), inv_resolution_(1.0 / params.resolution) {
+  views_.fill({&kEmptySlot, nullptr, 0});
+}
+
+void VoxelMap::setShard(std::size_t index, std::shared_ptr<const Shard> shard) {
+  views_[index] = shard ? ShardView{shard->slots.data(), shard->gaussians.data(), shard->slots.size() - 1}
+                        : ShardView{&kEmptySlot, nullptr, 0};
+  shards_[index] = std::move(shard);
+}
+
+VoxelKey VoxelMap::keyOf(const Eigen::Vector3f& p) const {
+  const float inv = static_cast<float>(inv_resolution_);
+  return {static_cast<std::int32_t>(std::floor(p.x() * inv)), static_cast<std::int32_t>(std::floor(p.y() * inv)),
+          static_cast<std::int32_t>(std::floor(p.z() * inv))};
+}
+
+const VoxelStats* VoxelMap::stats(const VoxelKey& key) const {
+  const std::uint64_t h = hash(key);
+  const Shard* s = shards_[shardOf(h)].get();
+  if (!s) return nullptr;
+  const std::int32_t i = s->indexOf(key, h);
+  return i >= 0 ? &s->stats[i] : nullptr;
+}
+
+std::size_t VoxelMap::bytes() const {
+  std::size_t b = sizeof(shards_);
+  for (const auto& s : shards_)
+    if (s)
+      b += sizeof(Shard) + s->slots.capacity() * sizeof(Shard::Slot) + s->keys.capacity() * sizeof(VoxelKey) +
+           s->stats.capacity() * sizeof(VoxelStats) + s->gaussians.capacity() * sizeof(VoxelGaussian);
+  return b;
+}
+
+double VoxelMap::bytesPerVoxel() const {
+  return voxels_ ? static_cast<double>(bytes()) / static_cast<double>(voxels_) : 0.0;
+}
+
+VoxelGaussian deriveGaussian(const VoxelKey& key, const VoxelStats& st, const VoxelMapParams& params) {
+  VoxelGaussian g;
+  g.valid = 0;
+  g.inv_cov.fill(0.0f);
+  const Eigen::Vector3d corner(key.x * params.resolution, key.y * params.resolution, key.z * params.resolution);
+  const double n = static_cast<double>(st.count);
+  const Eigen::Vector3d mean_local = st.count > 0 ? Eigen::Vector3d(st.sum / n) : Eigen::Vector3d::Zero();
+  g.mean = (corner + mean_local).cast<float>();
+  if (st.count < params.min_points_per_voxel) return g;
+  Eigen::Matrix3d sq;
+  sq << st.sum_sq[0], st.sum_sq[1], st.sum_sq[2], st.sum_sq[1], st.sum_sq[3], st.sum_sq[4], st.sum_sq[2], st.sum_sq[4],
+      st.sum_sq[5];
+  // Unbiased sample covariance: (sum x x^T - n mean mean^T) / (n - 1).
+  const Eigen::Matrix3d cov = (sq - n * mean_local * mean_local.transpose()) / (n - 1.0);
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+  if (eig.info() != Eigen::Success) return g;
+  Eigen::Vector3d lambda = eig.eigenvalues();  // ascending
+  const double largest = lambda(2);
+  if (!(largest > 0.0) || !std::isfinite(largest)) return g;
+  lambda = lambda.cwiseMax(params.eigenvalue_ratio * largest);
+  const Eigen::Matrix3d icov = eig.eigenvectors() * lambda.cwiseInverse().asDiagonal() * eig.eigenvectors().transpose();
+  if (!icov.allFinite()) return g;
+  g.inv_cov = {static_cast<float>(icov(0, 0)), static_cast<float>(icov(0, 1)), static_cast<float>(icov(0, 2)),
+               static_cast<float>(icov(1, 1)), static_cast<float>(icov(1, 2)), static_cast<float>(icov(2, 2))};
+  g.valid = 1;
+  return g;
+}
+
+std::vector<std::pair<VoxelKey, VoxelStats>> voxelStatistics(const PointCloud& points, double resolution, int threads) {
+  const std::size_t n = points.size();
+  const int nt = n < kMinParallelPoints ? 1 : resolveThreads(threads);
+  const double inv = 1.0 / resolution;
+  std::vector<VoxelKey> keys(n);
+  std::vector<std::uint32_t> shard(n);
+  std::vector<char> finite(n);
+  // Per-thread shard histograms over a fixed static partition make the counting sort deterministic.
+  std::vector<std::vector<std::size_t>> hist(nt, std::vector<std::size_t>(VoxelMap::kShards + 1, 0));
+#pragma omp parallel num_threads(nt)
+  {
+    const int t = teamThreadNum();
+    const std::size_t lo = n * t / nt, hi = n * (t + 1) / nt;
+    for (std::size_t i = lo; i < hi; ++i) {
+      const Eigen::Vector3d p = points[i].cast<double>();
+      finite[i] = p.allFinite();
+      if (!finite[i]) continue;
+      keys[i] = {static_cast<std::int32_t>(std::floor(p.x() * inv)), static_cast<std::int32_t>(std::floor(p.y() * inv)),
+                 static_cast<std::int32_t>(std::floor(p.z() * inv))};
+      shard[i] = static_cast<std::uint32_t>(VoxelMap::shardOf(VoxelMap::hash(keys[i])));
+      ++hist[t][shard[i] + 1];
+    }
+  }
+  // start[s] = first position of shard s in the sorted order; cursor[t][s] = where thread t writes.
+  std::vector<std::size_t> start(VoxelMap::kShards + 1, 0);
+  std::vector<std::vector<std::size_t>> cursor(nt, std::vector<std::size_t>(VoxelMap::kShards, 0));
+  std::size_t pos = 0;
+  for (std::size_t s = 0; s < VoxelMap::kShards; ++s) {
+    start[s] = pos;
+    for (int t = 0; t < nt; ++t) {
+      cursor[t][s] = pos;
+      pos += hist[t][s + 1];
+    }
+  }
+  start[VoxelMap::kShards] = pos;
+  std::vector<std::uint32_t> order(pos);
+#pragma omp parallel num_threads(nt)
+  {
+    const int t = teamThreadNum();
+    const std::size_t lo = n * t / nt, hi = n * (t + 1) / nt;
+    for (std::size_t i = lo; i < hi; ++i)
+      if (finite[i]) order[cursor[t][shard[i]]++] = static_cast<std::uint32_t>(i);
+  }
+  // Each shard is grouped on its own, voxels in order of first appearance.
+  std::vector<Delta> per_shard(VoxelMap::kShards);
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 16)
+  for (std::size_t s = 0; s < VoxelMap::kShards; ++s) {
+    if (start[s] == start[s + 1]) continue;
+    VoxelMap::Shard table;
+    Delta& out = per_shard[s];
+    for (std::size_t o = start[s]; o < start[s + 1]; ++o) {
+      const std::uint32_t i = order[o];
+      const VoxelKey& k = keys[i];
+      const std::uint64_t h = VoxelMap::hash(k);
+      std::int32_t idx = table.indexOf(k, h);
+      if (idx < 0) {
+        idx = static_cast<std::int32_t>(out.size());
+        out.push_back({k, VoxelStats()});
+        table.keys.push_back(k);
+        if (table.slots.size() < 2 * table.keys.size()) {
+          rebuildSlots(table);
+        } else {
+          const std::size_t mask = table.slots.size() - 1;
+          std::size_t sl = h & mask;
+          while (table.slots[sl].index >= 0) sl = (sl + 1) & mask;
+          table.slots[sl] = {k, idx};
+        }
+      }
+      const Eigen::Vector3d corner(k.x * resolution, k.y * resolution, k.z * resolution);
+      out[idx].second.add(points[i].cast<double>() - corner);
+    }
+  }
+  Delta all;
+  std::size_t total = 0;
+  for (const auto& d : per_shard) total += d.size();
+  all.reserve(total);
+  for (auto& d : per_shard) all.insert(all.end(), d.begin(), d.end());
+  return all;
+}
+
+NdtTarget::NdtTarget(const VoxelMapParams& params) : params_(params) {
+  const std::string problem = params.validate();
+  if (!problem.empty()) throw std::invalid_argument("NdtTarget: " + problem);
+  // Slice off anything a derived config (NdtConfig) adds: the snapshot keeps only the map parameters.
+  params_ = VoxelMapParams(params);
+  current_ = std::make_shared<const VoxelMap>(params_);
+}
+
+std::shared_ptr<const VoxelMap> NdtTarget::snapshot() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return current_;
+}
+
+void NdtTarget::publish(std::shared_ptr<const VoxelMap> next) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  current_ = std::move(next);
+}
+
+void NdtTarget::setTarget(const PointCloud& points) {
+  contributions_.clear();
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    current_ = std::make_shared<const VoxelMap>(params_);
+  }
+  const Delta delta = voxelStatistics(points, params_.resolution, params_.threads);
+  apply(delta, false);
+}
+
+void NdtTarget::addTarget(TargetId id, const PointCloud& points) {
+  if (contributions_.count(id))
+    throw std::invalid_argument("NdtTarget::addTarget: id " + std::to_string(id) +
+                                " is already in the target; remove it before adding it again");
+  Delta delta = voxelStatistics(points, params_.resolution, params_.threads);
+  apply(delta, false);
+  contributions_.emplace(id, std::move(delta));
+}
+
+bool NdtTarget::removeTarget(TargetId id) {
+  const auto it = contributions_.find(id);
+  if (it == contributions_.end()) return false;
+  apply(it->second, true);
+  contributions_.erase(it);
+  return true;
+}
+
+bool NdtTarget::hasTarget(TargetId id) const { return contributions_.count(id) != 0; }
+
+std::vector<TargetId> NdtTarget::targetIds() const {
+  std::vector<TargetId> ids;
+  ids.reserve(contributions_.size());
+  for (const auto& c : contributions_) ids.push_back(c.first);
+  std::sort(ids.begin(), ids.end());
+  return ids;
+}
+
+void NdtTarget::apply(const Delta& delta, bool subtract) {
+  const std::shared_ptr<const VoxelMap> base = current_;  // only this (writer) thread replaces current_
+  auto next = std::make_shared<VoxelMap>(*base);          // shares every shard
+  // delta is grouped by shard (voxelStatistics sorts it so): find each shard's range.
+  std::vector<std::pair<std::size_t, std::size_t>> ranges;  // [begin, end) per touched shard
+  for (std::size_t b = 0; b < delta.size();) {
+    const std::size_t s = VoxelMap::shardOf(VoxelMap::hash(delta[b].first));
+    std::size_t e = b + 1;
+    while (e < delta.size() && VoxelMap::shardOf(VoxelMap::hash(delta[e].first)) == s) ++e;
+    ranges.emplace_back(b, e);
+    b = e;
+  }
+  std::vector<std::int64_t> d_vox(ranges.size(), 0), d_gauss(ranges.size(), 0), d_pts(ranges.size(), 0);
+  const int nt = ranges.size() < kMinParallelShards ? 1 : resolveThreads(params_.threads);
+  bool missing = false;
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 4) reduction(|| : missing)
+  for (std::size_t r = 0; r < ranges.size(); ++r) {
+    const std::size_t s = VoxelMap::shardOf(VoxelMap::hash(delta[ranges[r].first].first));
+    const VoxelMap::Shard* old = base->shards_[s].get();
+    auto shard = old ? std::make_shared<VoxelMap::Shard>(*old) : std::make_shared<VoxelMap::Shard>();
+    const std::int64_t vox_before = static_cast<std::int64_t>(shard->keys.size());
+    std::int64_t gauss_before = 0;
+    for (const auto& g : shard->gaussians) gauss_before += g.valid;
+    std::vector<std::int32_t> touched;
+    bool removed_any = false;
+    for (std::size_t i = ranges[r].first; i < ranges[r].second; ++i) {
+      const auto& [key, st] = delta[i];
+      std::int32_t idx = shard->indexOf(key, VoxelMap::hash(key));
+      if (idx < 0) {
+        if (subtract) {  // cannot happen: an id's statistics were merged when it was added
+          missing = true;
+          continue;
+        }
+        idx = static_cast<std::int32_t>(shard->keys.size());
+        shard->keys.push_back(key);
+        shard->stats.emplace_back();
+        shard->gaussians.emplace_back();
+        if (shard->slots.size() < 2 * shard->keys.size()) {
+          rebuildSlots(*shard);
+        } else {
+          const std::size_t mask = shard->slots.size() - 1;
+          std::size_t sl = VoxelMap::hash(key) & mask;
+          while (shard->slots[sl].index >= 0) sl = (sl + 1) & mask;
+          shard->slots[sl] = {key, idx};
+        }
+      }
+      VoxelStats& target = shard->stats[idx];
+      if (subtract) {
+        target.subtract(st);
+        d_pts[r] -= st.count;
+        removed_any |= target.count == 0;
+      } else {
+        target.merge(st);
+        d_pts[r] += st.count;
+      }
+      touched.push_back(idx);
+    }
+    for (const std::int32_t idx : touched)
+      shard->gaussians[idx] = deriveGaussian(shard->keys[idx], shard->stats[idx], params_);
+    if (removed_any) {
+      // Compact away emptied voxels; starting them from zero again drops any round-off residue.
+      std::size_t w = 0;
+      for (std::size_t i = 0; i < shard->keys.size(); ++i) {
+        if (shard->stats[i].count == 0) continue;
+        shard->keys[w] = shard->keys[i];
+        shard->stats[w] = shard->stats[i];
+        shard->gaussians[w] = shard->gaussians[i];
+        ++w;
+      }
+      shard->keys.resize(w);
+      shard->stats.resize(w);
+      shard->gaussians.resize(w);
+      rebuildSlots(*shard);
+    }
+    std::int64_t gauss_after = 0;
+    for (const auto& g : shard->gaussians) gauss_after += g.valid;
+    d_vox[r] = static_cast<std::int64_t>(shard->keys.size()) - vox_before;
+    d_gauss[r] = gauss_after - gauss_before;
+    next->setShard(s, shard->keys.empty() ? nullptr : std::shared_ptr<const VoxelMap::Shard>(std::move(shard)));
+  }
+  if (missing) throw std::logic_error("NdtTarget: removing statistics of a voxel that is not in the map");
+  for (std::size_t r = 0; r < ranges.size(); ++r) {
+    next->voxels_ = static_cast<std::size_t>(static_cast<std::int64_t>(next->voxels_) + d_vox[r]);
+    next->gaussians_ = static_cast<std::size_t>(static_cast<std::int64_t>(next->gaussians_) + d_gauss[r]);
+    next->points_ = static_cast<std::size_t>(static_cast<std::int64_t>(next->points_) + d_pts[r]);
+  }
+  publish(std::move(next));
+}
+
+}  // namespace grid_puzzle_localization

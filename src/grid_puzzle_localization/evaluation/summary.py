@@ -1,0 +1,75 @@
+"""The experiment's summary (what summary.json holds), computed from each mode's trajectory and
+monitor log, the ground truth and the storage figures. Pure: no ROS, no plotting."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+from grid_puzzle_localization.evaluation.metrics import PairedErrors, interpolated_errors, paired_errors
+from grid_puzzle_localization.evaluation.paper import PAPER_FIGURES
+from grid_puzzle_localization.evaluation.resources import compare_to_baseline, mode_resources
+from grid_puzzle_localization.evaluation.trajectory import Trajectory
+from grid_puzzle_localization.monitor.log import MonitorLog
+
+BASELINE_MODE = "global"
+
+
+@dataclass(frozen=True)
+class ModeRun:
+    """One mode's outputs: its trajectory, its monitor log, and which monitored process plays which
+    role (``localizer``, ``map_provider``)."""
+
+    mode: str
+    trajectory: Trajectory
+    monitor: MonitorLog
+    roles: Mapping[str, str]
+
+
+def _errors(errors: PairedErrors) -> dict:
+    return {
+        "translation_m": dataclasses.asdict(errors.translation),
+        "rotation_deg": dataclasses.asdict(errors.rotation),
+    }
+
+
+def summarize_experiment(
+    runs: Sequence[ModeRun],
+    ground_truth: Trajectory | None,
+    storage: Mapping | None,
+    max_diff_s: float,
+    scenario: Mapping,
+) -> dict:
+    """The summary dictionary: per-mode resources (both protocols) and APE, the paper's RMSE between
+    the baseline (global) and every other mode, reductions against the baseline, storage, and the
+    paper's figures."""
+    modes = {}
+    for run in runs:
+        ape = None if ground_truth is None else interpolated_errors(ground_truth, run.trajectory, max_diff_s)
+        modes[run.mode] = {
+            "poses": len(run.trajectory),
+            "duration_s": float(run.trajectory.t[-1] - run.trajectory.t[0]) if len(run.trajectory) else 0.0,
+            "roles": dict(run.roles),
+            "resources": mode_resources(run.mode, run.roles, run.monitor),
+            "ape": None if ape is None else _errors(ape),
+            "events": [dataclasses.asdict(e) for e in run.monitor.events],
+        }
+    by_mode = {run.mode: run for run in runs}
+    between = {}
+    if BASELINE_MODE in by_mode:
+        base = by_mode[BASELINE_MODE].trajectory
+        for run in runs:
+            if run.mode != BASELINE_MODE:
+                between[f"{run.mode}_vs_{BASELINE_MODE}"] = _errors(paired_errors(base, run.trajectory, max_diff_s))
+    resources = {mode: m["resources"] for mode, m in modes.items()}
+    return {
+        "scenario": dict(scenario),
+        "max_time_diff_s": max_diff_s,
+        "baseline_mode": BASELINE_MODE,
+        "modes": modes,
+        "between_modes": between,
+        "reductions": compare_to_baseline(resources, BASELINE_MODE) if BASELINE_MODE in resources else {},
+        "storage": dict(storage) if storage is not None else None,
+        "paper": PAPER_FIGURES,
+    }

@@ -1,0 +1,88 @@
+"""Trajectories as arrays and the TUM file format.
+
+TUM: one pose per line, ``timestamp tx ty tz qx qy qz qw`` (seconds; metres; unit quaternion, scalar
+last), separated by spaces; lines starting with ``#`` are comments."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from grid_puzzle_localization.atomic import atomic_write
+from grid_puzzle_localization.errors import UserError
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Poses at strictly increasing times: ``t`` (N,) [s], ``xyz`` (N, 3) [m], ``quat`` (N, 4) unit
+    quaternions (x, y, z, w)."""
+
+    t: np.ndarray
+    xyz: np.ndarray
+    quat: np.ndarray
+
+    def __post_init__(self):
+        n = len(self.t)
+        if self.t.shape != (n,) or self.xyz.shape != (n, 3) or self.quat.shape != (n, 4):
+            shapes = f"t {self.t.shape}, xyz {self.xyz.shape}, quat {self.quat.shape}"
+            raise ValueError(f"trajectory arrays disagree: {shapes}")
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+def _checked(t: np.ndarray, xyz: np.ndarray, quat: np.ndarray, source: str) -> Trajectory:
+    if len(t) and not np.all(np.isfinite(np.hstack([t[:, None], xyz, quat]))):
+        raise UserError(f"{source}: a pose has a NaN or infinite value; fix or drop that line")
+    if np.any(np.diff(t) <= 0):
+        first = int(np.argmax(np.diff(t) <= 0)) + 1
+        raise UserError(f"{source}: timestamps must increase strictly (pose {first} at t={t[first]} does not)")
+    norms = np.linalg.norm(quat, axis=1)
+    if np.any(np.abs(norms - 1.0) > 1e-3):
+        bad = int(np.argmax(np.abs(norms - 1.0) > 1e-3))
+        raise UserError(f"{source}: pose {bad} has a quaternion of norm {norms[bad]:.6f}, not a unit quaternion")
+    return Trajectory(t, xyz, quat / norms[:, None] if len(t) else quat)
+
+
+def make_trajectory(t, xyz, quat, source: str = "trajectory") -> Trajectory:
+    """Validated trajectory from array-likes (increasing times, finite values, unit quaternions)."""
+    return _checked(
+        np.asarray(t, dtype=np.float64).reshape(-1),
+        np.asarray(xyz, dtype=np.float64).reshape(-1, 3),
+        np.asarray(quat, dtype=np.float64).reshape(-1, 4),
+        source,
+    )
+
+
+def read_tum(path: str | os.PathLike) -> Trajectory:
+    """Reads a TUM trajectory file; raises UserError naming the file and line on bad input."""
+    rows = []
+    try:
+        with open(path) as f:
+            for line_no, line in enumerate(f, 1):
+                text = line.strip()
+                if not text or text.startswith("#"):
+                    continue
+                fields = text.split()
+                if len(fields) != 8:
+                    raise UserError(
+                        f"{path}:{line_no}: a TUM line has 8 numbers (t tx ty tz qx qy qz qw), found {len(fields)}"
+                    )
+                try:
+                    rows.append([float(x) for x in fields])
+                except ValueError as err:
+                    raise UserError(f"{path}:{line_no}: not a number ({err})") from err
+    except OSError as err:
+        raise UserError(f"cannot read trajectory {path}: {err.strerror}") from err
+    data = np.array(rows, dtype=np.float64).reshape(-1, 8)
+    return _checked(data[:, 0], data[:, 1:4], data[:, 4:8], str(path))
+
+
+def write_tum(path: str | os.PathLike, traj: Trajectory) -> None:
+    """Writes ``traj`` as TUM (nanosecond times, nanometre positions), atomically."""
+    data = np.hstack([traj.t[:, None], traj.xyz, traj.quat])
+    with atomic_write(path) as f:
+        f.write("# timestamp tx ty tz qx qy qz qw\n")
+        np.savetxt(f, data, fmt="%.9f")

@@ -1,0 +1,103 @@
+"""`gpm experiment`: the paper's experiment on a scenario directory (from `gpm simulate`) or on your
+own bag, map and ground truth. Writes OUT/summary.json, OUT/report.md, OUT/plots/ and one directory
+per mode, and prints the comparison table."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+
+from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.evaluation.storage import storage_figures
+from grid_puzzle_localization.experiment.config import MODES, PRESETS, ExperimentConfig, NodeRoles, WindowPreset
+from grid_puzzle_localization.experiment.maps import ensure_blocks, ensure_submaps, ensure_tiles
+from grid_puzzle_localization.experiment.runner import run_experiment
+from grid_puzzle_localization.experiment.scenario import read_scenario
+from grid_puzzle_localization.report.markdown import comparison_table
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("scenario", nargs="?", help="scenario directory from `gpm simulate` (or use --bag/--map)")
+    parser.add_argument("-o", "--out", required=True, help="output directory")
+    parser.add_argument("--bag", help="rosbag with points, imu and /tf_static (overrides the scenario's)")
+    parser.add_argument("--map", help="global map PCD (overrides the scenario's)")
+    parser.add_argument("--ground-truth", help="ground truth TUM file (optional)")
+    parser.add_argument("--tiles", help="tile directory: reused if it holds the map tiles, else cut (OUT/tiles_s<S>)")
+    parser.add_argument(
+        "--blocks", help="block map directory from `gpm blocks` (default: stitched from the map along the ground truth)"
+    )
+    parser.add_argument(
+        "--block-size", type=float, default=ExperimentConfig.block_size_m, help="block size S [m] of built block maps"
+    )
+    parser.add_argument("--modes", nargs="+", default=["global", "grid_puzzle"], choices=MODES, help="modes to run")
+    parser.add_argument(
+        "--preset", default="demo", choices=sorted(PRESETS), help="window preset n, k, s (default demo)"
+    )
+    parser.add_argument("--n", type=int, help="window half side [tiles] (overrides the preset)")
+    parser.add_argument("--k", type=int, help="window heading extension [tiles] (overrides the preset)")
+    parser.add_argument("--grid-size", type=float, help="tile side s [m] (overrides the preset)")
+    parser.add_argument("--rate", type=float, default=1.0, help="bag playback speed, times real time (default 1)")
+    parser.add_argument("--interval", type=float, default=0.5, help="monitor sampling period [s] (default 0.5)")
+    parser.add_argument("--ndt-threads", type=int, default=0, help="NDT threads, 0 = all cores (default 0)")
+    parser.add_argument(
+        "--initial-pose", type=float, nargs=6, metavar=("X", "Y", "Z", "ROLL", "PITCH", "YAW"),
+        help="start pose [m, rad] (default: the first ground-truth pose)",
+    )  # fmt: skip
+    parser.add_argument("--settle", type=float, default=2.0, help="wait after start-up and after playback [s]")
+    parser.add_argument("--max-time-diff", type=float, default=0.05, help="pose association tolerance [s]")
+    parser.add_argument("--localizer-node", default=NodeRoles.localizer, help="node whose process runs the NDT")
+    parser.add_argument("--provider-node", default=NodeRoles.map_provider, help="node of the tile provider")
+    parser.add_argument("--block-server-node", default=NodeRoles.block_server, help="node of the block map server")
+
+
+def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
+    scenario = read_scenario(args.scenario) if args.scenario else None
+    bag = args.bag or (scenario.bag if scenario else None)
+    global_map = args.map or (scenario.global_map if scenario else None)
+    if bag is None or global_map is None:
+        raise UserError("give a scenario directory, or --bag and --map (and optionally --ground-truth)")
+    gt = args.ground_truth or (scenario.ground_truth if scenario else None)
+    p = PRESETS[args.preset]
+    window = WindowPreset(
+        args.n if args.n is not None else p.n,
+        args.k if args.k is not None else p.k,
+        args.grid_size if args.grid_size is not None else p.grid_size_m,
+    )
+    return ExperimentConfig(
+        out_dir=Path(args.out),
+        bag=Path(bag),
+        global_map=Path(global_map),
+        ground_truth=Path(gt) if gt else None,
+        tiles=Path(args.tiles) if args.tiles else None,
+        blocks=Path(args.blocks) if args.blocks else None,
+        block_size_m=args.block_size,
+        modes=list(dict.fromkeys(args.modes)),
+        preset=args.preset,
+        window=window,
+        rate=args.rate,
+        monitor_interval_s=args.interval,
+        max_time_diff_s=args.max_time_diff,
+        settle_s=args.settle,
+        ndt_threads=args.ndt_threads,
+        initial_pose=list(args.initial_pose) if args.initial_pose else None,
+        roles=NodeRoles(args.localizer_node, args.provider_node, args.block_server_node),
+        scenario_name=scenario.name if scenario else "custom",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    cfg = config_from_args(args)
+    cfg.check()
+    tile_dir = cfg.tiles or cfg.out_dir / f"tiles_s{cfg.window.grid_size_m:g}"
+    tiles = ensure_tiles(cfg.global_map, tile_dir, cfg.window.grid_size_m)
+    blocks = submaps = None
+    if "block_map" in cfg.modes:
+        size = cfg.block_size_m
+        blocks = cfg.blocks or ensure_blocks(cfg.global_map, cfg.ground_truth, cfg.out_dir / f"blocks_S{size:g}", size)
+        submaps = ensure_submaps(cfg.global_map, cfg.out_dir / f"submaps_L{size:g}", size)
+        cfg = dataclasses.replace(cfg, blocks=blocks)
+    summary = run_experiment(cfg, tiles, storage_figures(cfg.global_map, tiles, blocks, submaps))
+    print("\n".join(comparison_table(summary)))
+    print(f"\nreport: {cfg.out_dir / 'report.md'}, plots: {cfg.out_dir / 'plots'}/")
+    return 0

@@ -1,0 +1,87 @@
+"""Configuration of an experiment run: inputs, modes, window presets, playback and monitoring."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from grid_puzzle_localization.blocks.builder import BlockConfig
+from grid_puzzle_localization.errors import UserError
+
+MODES = ("global", "grid_puzzle", "block_map")
+
+
+@dataclass(frozen=True)
+class WindowPreset:
+    """Grid puzzle window: half side n [tiles], heading extension k [tiles], tile side s [m]."""
+
+    n: int
+    k: int
+    grid_size_m: float
+
+
+# The paper's presets (Section IV), and a small one for the demo and the tests.
+PRESETS: dict[str, WindowPreset] = {
+    "courtyard": WindowPreset(17, 10, 2.0),
+    "urban": WindowPreset(25, 20, 2.0),
+    "demo": WindowPreset(8, 5, 2.0),
+}
+
+
+@dataclass(frozen=True)
+class NodeRoles:
+    """ROS node names whose processes play each role (the nodelet runs inside its manager)."""
+
+    localizer: str = "/localizer_manager"
+    map_provider: str = "/grid_puzzle_map_provider"
+    block_server: str = "/block_map_server"  # the block_map mode's map provider
+    recorder: str = "/trajectory_recorder"
+
+
+@dataclass
+class ExperimentConfig:
+    out_dir: Path
+    bag: Path
+    global_map: Path
+    ground_truth: Path | None = None
+    tiles: Path | None = None  # None: cut from global_map into out_dir/tiles
+    blocks: Path | None = None  # block map directory from `gpm blocks`; None: built from global_map along ground_truth
+    block_size_m: float = BlockConfig.block_size  # S of the blocks built when blocks is None
+    modes: list[str] = field(default_factory=lambda: ["global", "grid_puzzle"])
+    preset: str = "demo"
+    window: WindowPreset = PRESETS["demo"]
+    rate: float = 1.0  # bag playback speed, times real time
+    monitor_interval_s: float = 0.5
+    max_time_diff_s: float = 0.05  # pose association tolerance
+    startup_timeout_s: float = 60.0
+    settle_s: float = 2.0  # after the nodes are up, and after the bag ends
+    ndt_threads: int = 0  # 0 = all cores
+    initial_pose: list[float] | None = None  # x y z roll pitch yaw [m, rad]; None: first ground-truth pose
+    roles: NodeRoles = field(default_factory=NodeRoles)
+    launch_file: str = "localization.launch"  # of this package, or an absolute path
+    scenario_name: str = "custom"
+
+    def check(self) -> None:
+        """Raises UserError for a setting that cannot work, naming it."""
+        for mode in self.modes:
+            if mode not in MODES:
+                raise UserError(f"unknown mode '{mode}' (use {', '.join(MODES)})")
+        if not self.modes:
+            raise UserError("give at least one mode (--modes global grid_puzzle)")
+        if not self.rate > 0:
+            raise UserError(f"--rate must be > 0 (got {self.rate})")
+        if not self.monitor_interval_s > 0:
+            raise UserError(f"--interval must be > 0 s (got {self.monitor_interval_s})")
+        for label, path in (("bag", self.bag), ("global map", self.global_map), ("ground truth", self.ground_truth)):
+            if path is not None and not Path(path).is_file():
+                raise UserError(f"{label} {path} does not exist")
+        if "block_map" in self.modes and self.blocks is None and self.ground_truth is None:
+            raise UserError(
+                "block_map mode needs --blocks DIR (from `gpm blocks`), or ground truth to build them from the map"
+            )
+        if not self.block_size_m > 0:
+            raise UserError(f"--block-size must be > 0 m (got {self.block_size_m})")
+        if self.initial_pose is None and self.ground_truth is None:
+            raise UserError("without ground truth, give the start pose: --initial-pose X Y Z ROLL PITCH YAW")
+        if self.initial_pose is not None and len(self.initial_pose) != 6:
+            raise UserError(f"--initial-pose needs 6 numbers x y z roll pitch yaw (got {self.initial_pose})")

@@ -1,0 +1,84 @@
+"""Parameters of grid_puzzle_map_provider. The dataclasses hold the defaults (one place);
+config/grid_puzzle_map_provider.yaml documents each parameter with its unit (a test keeps the two equal).
+Nested dataclasses are parameter groups: ``window.n`` is the ROS parameter ``~window/n``."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.window import WindowConfig
+
+POSE_SOURCES = ("odom", "pose")
+
+
+@dataclass(frozen=True)
+class TilesConfig:
+    dir: str = ""  # tile directory written by `gpm tile` (required)
+    grid_size: float = 0.0  # [m] tile side s; 0 = take it from the index (required when there is none)
+    cache_mb: float = 0.0  # [MiB] bound of the prefetch cache; 0 = auto: the bytes of the loaded window
+
+
+@dataclass(frozen=True)
+class ProviderConfig:
+    tiles: TilesConfig = field(default_factory=TilesConfig)
+    window: WindowConfig = field(default_factory=WindowConfig)
+    pose_source: str = "odom"  # odom: nav_msgs/Odometry on `odom`; pose: PoseWithCovarianceStamped on `pose`
+    publish_map_cloud: bool = True  # publish the merged window on the latched `map_cloud`
+    map_frame: str = "map"  # frame of the tiles, the incoming poses and every published cloud
+
+    def checked(self) -> ProviderConfig:
+        """Raises UserError naming the first bad parameter; returns self with the window resolved."""
+        if not self.tiles.dir:
+            raise UserError("parameter tiles/dir is empty; set it to a tile directory written by `gpm tile`")
+        if self.tiles.grid_size < 0.0:
+            raise UserError(
+                f"parameter tiles/grid_size must be > 0 m, or 0 to read it from the index (got {self.tiles.grid_size})"
+            )
+        if not self.tiles.cache_mb >= 0.0:
+            raise UserError(f"parameter tiles/cache_mb must be >= 0 MiB (got {self.tiles.cache_mb})")
+        if self.pose_source not in POSE_SOURCES:
+            raise UserError(f"parameter pose_source '{self.pose_source}' is unknown; use one of {POSE_SOURCES}")
+        return dataclasses.replace(self, window=self.window.resolved())
+
+
+def parameter_defaults(cls: type = ProviderConfig, prefix: str = "") -> dict[str, Any]:
+    """Flat ``{"group/name": default}`` of a (nested) config dataclass."""
+    out: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        default = f.default_factory() if f.default is dataclasses.MISSING else f.default
+        if dataclasses.is_dataclass(default):
+            out.update(parameter_defaults(type(default), f"{prefix}{f.name}/"))
+        else:
+            out[prefix + f.name] = default
+    return out
+
+
+def load_config(get: Callable[[str, Any], Any], cls: type = ProviderConfig, prefix: str = ""):
+    """Builds ``cls`` from ``get(name, default)`` (e.g. rospy.get_param on ``~name``), converting each
+    value to its default's type; raises UserError naming a parameter of the wrong type."""
+    values = {}
+    for f in dataclasses.fields(cls):
+        default = f.default_factory() if f.default is dataclasses.MISSING else f.default
+        name = prefix + f.name
+        if dataclasses.is_dataclass(default):
+            values[f.name] = load_config(get, type(default), name + "/")
+            continue
+        value = get(name, default)
+        values[f.name] = _coerce(name, value, type(default))
+    return cls(**values)
+
+
+def _coerce(name: str, value: Any, kind: type) -> Any:
+    ok = {
+        bool: isinstance(value, bool),
+        int: isinstance(value, int) and not isinstance(value, bool),
+        float: isinstance(value, int | float) and not isinstance(value, bool),
+        str: isinstance(value, str),
+    }[kind]
+    if not ok:
+        raise UserError(f"parameter {name} must be a {kind.__name__} (got {value!r})")
+    return kind(value)

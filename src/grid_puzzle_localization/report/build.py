@@ -1,0 +1,99 @@
+"""Builds summary.json, report.md and plots/ from an experiment directory:
+
+OUT/run.json                    scenario, modes, roles per mode, ground truth path, storage figures
+OUT/<mode>/trajectory.tum       the localizer's odometry (TUM)
+OUT/<mode>/monitor.csv, .json   the resource monitor's samples and summary (with events)
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from grid_puzzle_localization.atomic import atomic_write
+from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.evaluation.resources import protocol_processes
+from grid_puzzle_localization.evaluation.summary import ModeRun, summarize_experiment
+from grid_puzzle_localization.evaluation.trajectory import read_tum
+from grid_puzzle_localization.monitor.log import Event, read_csv
+from grid_puzzle_localization.report import plots
+from grid_puzzle_localization.report.markdown import render_report
+
+RUN_FILE = "run.json"
+TRAJECTORY = "trajectory.tum"
+MONITOR_CSV = "monitor.csv"
+MONITOR_JSON = "monitor.json"
+
+
+@dataclass
+class RunInfo:
+    """What run.json holds: everything besides the per-mode outputs that the report needs."""
+
+    scenario: dict
+    modes: list[str]
+    roles: dict[str, dict[str, str]]  # mode -> role -> monitored process name
+    ground_truth: str | None = None
+    storage: dict | None = None
+    max_diff_s: float = 0.05
+    extra: dict = field(default_factory=dict)
+
+
+def write_json(path: str | os.PathLike, data) -> None:
+    with atomic_write(path) as f:
+        json.dump(data, f, indent=2)
+        f.write("\n")
+
+
+def read_json(path: str | os.PathLike):
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except OSError as err:
+        raise UserError(f"cannot read {path}: {err.strerror}") from err
+    except json.JSONDecodeError as err:
+        raise UserError(f"{path} is not valid JSON ({err})") from err
+
+
+def write_run_info(out_dir: str | os.PathLike, info: RunInfo) -> None:
+    write_json(Path(out_dir) / RUN_FILE, asdict(info))
+
+
+def read_run_info(out_dir: str | os.PathLike) -> RunInfo:
+    data = read_json(Path(out_dir) / RUN_FILE)
+    try:
+        return RunInfo(**data)
+    except TypeError as err:
+        raise UserError(f"{Path(out_dir) / RUN_FILE} does not describe an experiment ({err})") from err
+
+
+def load_mode(out_dir: Path, mode: str, roles: dict[str, str]) -> ModeRun:
+    d = out_dir / mode
+    log = read_csv(d / MONITOR_CSV)
+    if (d / MONITOR_JSON).exists():
+        log.events = [Event(**e) for e in read_json(d / MONITOR_JSON).get("events", [])]
+    return ModeRun(mode, read_tum(d / TRAJECTORY), log, roles)
+
+
+def build_report(out_dir: str | os.PathLike) -> dict:
+    """Evaluates the experiment in ``out_dir`` and writes summary.json, report.md and plots/*.png.
+    Returns the summary."""
+    out = Path(out_dir)
+    info = read_run_info(out)
+    runs = [load_mode(out, mode, info.roles.get(mode, {})) for mode in info.modes]
+    gt = read_tum(info.ground_truth) if info.ground_truth else None
+    summary = summarize_experiment(runs, gt, info.storage, info.max_diff_s, info.scenario)
+    write_json(out / "summary.json", summary)
+    with atomic_write(out / "report.md") as f:
+        f.write(render_report(summary))
+    logs = {r.mode: r.monitor for r in runs}
+    processes = {
+        r.mode: {p: protocol_processes(r.mode, r.roles, r.monitor, p) for p in ("paper", "total")} for r in runs
+    }
+    trajectories = {r.mode: r.trajectory for r in runs}
+    plots.plot_cpu(out / "plots" / "cpu.png", logs, processes)
+    plots.plot_memory(out / "plots" / "memory.png", logs, processes)
+    plots.plot_trajectories(out / "plots" / "trajectories.png", trajectories, gt)
+    plots.plot_errors(out / "plots" / "errors.png", trajectories, gt, info.max_diff_s)
+    return summary

@@ -1,0 +1,110 @@
+"""PNG plots of an experiment with matplotlib's object API on the Agg canvas (no display, no pyplot
+global state)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from grid_puzzle_localization.atomic import atomic_write
+from grid_puzzle_localization.evaluation.metrics import interpolated_errors, paired_errors
+from grid_puzzle_localization.evaluation.trajectory import Trajectory
+from grid_puzzle_localization.monitor.log import MonitorLog
+from grid_puzzle_localization.report.markdown import MIB, MODE_TITLES
+
+COLORS = {"global": "tab:blue", "grid_puzzle": "tab:orange", "block_map": "tab:green"}
+
+
+def _save(fig: Figure, path: str | os.PathLike) -> None:
+    FigureCanvasAgg(fig)
+    with atomic_write(path, "wb") as f:
+        fig.savefig(f, format="png", dpi=110)
+
+
+def _title(mode: str) -> str:
+    return MODE_TITLES.get(mode, mode)
+
+
+def plot_resource(
+    path: str | os.PathLike,
+    logs: Mapping[str, MonitorLog],
+    processes: Mapping[str, Mapping[str, Sequence[str]]],
+    metric: str,
+    ylabel: str,
+    scale: float = 1.0,
+) -> None:
+    """One panel per protocol: ``metric`` summed over the protocol's processes, per mode, over time.
+    ``processes[mode][protocol]`` lists the process names."""
+    protocols = list(next(iter(processes.values())))
+    fig = Figure(figsize=(9, 3.2 * len(protocols)), layout="constrained")
+    axes = fig.subplots(len(protocols), 1, squeeze=False)[:, 0]
+    for ax, protocol in zip(axes, protocols, strict=True):
+        for mode, log in logs.items():
+            values = log.sum(metric, list(processes[mode][protocol])) / scale
+            ax.plot(log.t_s, values, color=COLORS.get(mode), label=_title(mode), lw=1.2)
+        ax.set_title(f"{protocol} protocol")
+        ax.set_xlabel("time since monitoring started [s]")
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+        ax.legend(loc="best")
+    _save(fig, path)
+
+
+def plot_cpu(path, logs, processes) -> None:
+    plot_resource(path, logs, processes, "cpu_percent", "CPU [% of one core]")
+
+
+def plot_memory(path, logs, processes) -> None:
+    plot_resource(path, logs, processes, "rss_bytes", "RSS [MiB]", MIB)
+
+
+def plot_trajectories(
+    path: str | os.PathLike, trajectories: Mapping[str, Trajectory], ground_truth: Trajectory | None
+) -> None:
+    """Top-down (x, y) view of every mode's trajectory over the ground truth."""
+    fig = Figure(figsize=(7, 7), layout="constrained")
+    ax = fig.subplots()
+    if ground_truth is not None:
+        ax.plot(ground_truth.xyz[:, 0], ground_truth.xyz[:, 1], color="black", lw=3, alpha=0.35, label="ground truth")
+    for mode, traj in trajectories.items():
+        ax.plot(traj.xyz[:, 0], traj.xyz[:, 1], color=COLORS.get(mode), lw=1.0, label=_title(mode))
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best")
+    _save(fig, path)
+
+
+def plot_errors(
+    path: str | os.PathLike,
+    trajectories: Mapping[str, Trajectory],
+    ground_truth: Trajectory | None,
+    max_diff_s: float,
+    baseline: str = "global",
+) -> None:
+    """Position error over time: each mode against the ground truth (when given), and each mode
+    against the baseline mode's trajectory (the paper's comparison)."""
+    panels = (["ground truth"] if ground_truth is not None else []) + (
+        [baseline] if baseline in trajectories and len(trajectories) > 1 else []
+    )
+    fig = Figure(figsize=(9, 3.2 * max(1, len(panels))), layout="constrained")
+    axes = fig.subplots(max(1, len(panels)), 1, squeeze=False)[:, 0]
+    t0 = min(float(tr.t[0]) for tr in trajectories.values() if len(tr))
+    for ax, panel in zip(axes, panels, strict=False):
+        reference = ground_truth if panel == "ground truth" else trajectories[baseline]
+        for mode, traj in trajectories.items():
+            if panel == baseline and mode == baseline:
+                continue
+            e = (interpolated_errors if panel == "ground truth" else paired_errors)(reference, traj, max_diff_s)
+            ax.plot(e.t - t0, e.translation_m, color=COLORS.get(mode), lw=1.0, label=_title(mode))
+        ax.set_title(f"position error against {'the ' + _title(baseline) + ' run' if panel == baseline else panel}")
+        ax.set_xlabel("time since the first pose [s]")
+        ax.set_ylabel("error [m]")
+        ax.set_ylim(bottom=0.0)
+        ax.grid(alpha=0.3)
+        ax.legend(loc="best")
+    _save(fig, path)

@@ -1,0 +1,232 @@
+"""grid_puzzle_map_provider: serves the tiles of the grid puzzle window around the robot.
+
+Subscribes to ``odom`` (nav_msgs/Odometry; then also to ``initialpose``, which seeds the first window
+before the localizer has a map) or ``pose`` (PoseWithCovarianceStamped), all in the map frame.
+Callbacks only store the latest pose; a worker thread recomputes the window (window.py), updates the
+tile store (tile_store.py) and publishes ``tile_delta`` (TileDelta), the latched ``map_cloud`` and the
+latched ``~status``. Delta protocol: every broadcast delta increments ``revision`` by one; a new
+subscriber first receives a ``reset`` delta of the whole window carrying the current revision; the
+service ``~resend`` (std_srvs/Trigger) broadcasts a reset delta so a subscriber that saw a revision gap
+can recover.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import threading
+
+import rospy
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import PointCloud2
+from std_srvs.srv import Trigger, TriggerResponse
+
+from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.malloc_tuning import pin_mmap_threshold
+from grid_puzzle_localization.msg import ProviderStatus, TileDelta
+from grid_puzzle_localization.provider_config import ProviderConfig, load_config
+from grid_puzzle_localization.ros.cloud_msg import cloud_from_parts
+from grid_puzzle_localization.ros.provider_msgs import provider_status, stamped, tile_delta
+from grid_puzzle_localization.tile_directory import open_tile_directory
+from grid_puzzle_localization.tile_store import StoreDelta, TileStore
+from grid_puzzle_localization.window import PoseSample, Window, WindowTracker
+
+WARN_PERIOD = 5.0  # [s] throttle of repeated warnings (off the map, wrong frame)
+
+
+def yaw_of(q) -> float | None:
+    """Yaw [rad] of a geometry_msgs/Quaternion; None when it is all zeros (orientation not set)."""
+    if q.x == q.y == q.z == q.w == 0.0:
+        return None
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def pose_sample(pose, stamp: rospy.Time, twist=None) -> PoseSample:
+    """PoseSample of a geometry_msgs/Pose; a body-frame twist becomes a map-frame velocity."""
+    yaw = yaw_of(pose.orientation)
+    velocity = None
+    if twist is not None and yaw is not None:
+        c, s = math.cos(yaw), math.sin(yaw)
+        vx, vy = twist.linear.x, twist.linear.y
+        velocity = (c * vx - s * vy, s * vx + c * vy)
+    return PoseSample(pose.position.x, pose.position.y, stamp.to_sec(), yaw, velocity)
+
+
+class ResetOnSubscribe(rospy.SubscribeListener):
+    def __init__(self, node: MapProviderNode) -> None:
+        super().__init__()
+        self.node = node
+
+    def peer_subscribe(self, topic_name, topic_publish, peer_publish):
+        self.node.send_reset(peer_publish, increment=False)
+
+
+class MapProviderNode:
+    def __init__(self, config: ProviderConfig) -> None:
+        self.config = config.checked()
+        tiles = self.config.tiles
+        self.directory = open_tile_directory(tiles.dir, tiles.grid_size or None)
+        self.s = self.directory.grid_size
+        if self.directory.unparsable:
+            rospy.logwarn(
+                "%s: %d .pcd files are not tiles of side %g m and are ignored: %s",
+                tiles.dir,
+                len(self.directory.unparsable),
+                self.s,
+                ", ".join(self.directory.unparsable[:10]),
+            )
+        self.tracker = WindowTracker(self.config.window, self.s)
+        self.store = TileStore(self.directory, tiles.cache_mb)
+        self.frame = self.config.map_frame
+        # Serialises store updates and every publish on tile_delta, so a reset sent to a new subscriber
+        # (from rospy's connection thread) or by ~resend is consistent with the delta stream.
+        self._lock = threading.Lock()
+        self._revision = 0
+        self._window: Window | None = None
+        self._off_map = False
+        self._latest: PoseSample | None = None
+        self._pose_ready = threading.Condition()
+
+        self.delta_pub = rospy.Publisher(
+            "tile_delta", TileDelta, queue_size=50, subscriber_listener=ResetOnSubscribe(self)
+        )
+        self.cloud_pub = (
+            rospy.Publisher("map_cloud", PointCloud2, queue_size=1, latch=True)
+            if self.config.publish_map_cloud
+            else None
+        )
+        self.status_pub = rospy.Publisher("~status", ProviderStatus, queue_size=10, latch=True)
+        rospy.Service("~resend", Trigger, self._on_resend)
+        if self.config.pose_source == "odom":
+            rospy.Subscriber("odom", Odometry, self._on_odom, queue_size=1)
+            # The localizer publishes odom only once it has a map, which in tiles mode comes from here:
+            # the start pose (rviz or the experiment runner) seeds the first window.
+            rospy.Subscriber("initialpose", PoseWithCovarianceStamped, self._on_pose, queue_size=1)
+        else:
+            rospy.Subscriber("pose", PoseWithCovarianceStamped, self._on_pose, queue_size=1)
+        self._worker = threading.Thread(target=self._run, name="map_provider_worker", daemon=True)
+        self._worker.start()
+        rospy.loginfo(
+            "grid_puzzle_map_provider: %d tiles of %g m in %s (%s), n=%d k=%d, update distance %g m, listening on %s",
+            len(self.directory.keys),
+            self.s,
+            tiles.dir,
+            self.directory.source,
+            self.tracker.config.n,
+            self.tracker.config.k,
+            self.tracker.update_distance,
+            self.config.pose_source,
+        )
+
+    # ------------------------------------------------------------ callbacks (never block)
+    def _on_odom(self, msg: Odometry) -> None:
+        if self._frame_ok(msg.header.frame_id):
+            self._offer(pose_sample(msg.pose.pose, msg.header.stamp, msg.twist.twist))
+
+    def _on_pose(self, msg: PoseWithCovarianceStamped) -> None:
+        if self._frame_ok(msg.header.frame_id):
+            self._offer(pose_sample(msg.pose.pose, msg.header.stamp))
+
+    def _frame_ok(self, frame_id: str) -> bool:
+        if frame_id in ("", self.frame):
+            return True
+        rospy.logwarn_throttle(
+            WARN_PERIOD, "ignoring a pose in frame '%s': poses must be in map_frame '%s'", frame_id, self.frame
+        )
+        return False
+
+    def _offer(self, pose: PoseSample) -> None:
+        with self._pose_ready:
+            self._latest = pose
+            self._pose_ready.notify()
+
+    def _on_resend(self, _req) -> TriggerResponse:
+        sent = self.send_reset(self.delta_pub.publish, increment=True)
+        if sent is None:
+            return TriggerResponse(success=False, message="no window yet: no pose has arrived")
+        return TriggerResponse(success=True, message=f"revision {sent}: reset delta of the whole window")
+
+    # ------------------------------------------------------------ worker
+    def _run(self) -> None:
+        while not rospy.is_shutdown():
+            with self._pose_ready:
+                if self._latest is None:
+                    self._pose_ready.wait(0.5)
+                pose, self._latest = self._latest, None
+            if pose is None:
+                continue
+            window = self.tracker.update(pose)
+            if window is not None:
+                self._serve(pose, window)
+        self.store.close()
+
+    def _serve(self, pose: PoseSample, window: Window) -> None:
+        stamp = rospy.Time.from_sec(pose.t) if pose.t > 0.0 else rospy.Time.now()
+        with self._lock:
+            delta = self.store.update(window, self.tracker.predicted_windows())
+            first = self._window is None
+            changed = first or delta.added or delta.removed or window.bounds != self._window.bounds
+            self._window = window
+            if changed:
+                self._revision += 1
+                self.delta_pub.publish(
+                    tile_delta(
+                        stamped(self.frame, stamp), self._revision, first, self.s, window, delta.added, delta.removed
+                    )
+                )
+        self._report(pose, window, delta)
+        if self.cloud_pub is not None and (first or delta.added or delta.removed):
+            self.cloud_pub.publish(
+                cloud_from_parts(
+                    [p for _, p in self.store.loaded()], self.store.dtype, header=stamped(self.frame, stamp)
+                )
+            )
+        self.status_pub.publish(provider_status(stamped(self.frame, stamp), window, self.store.stats(), delta.load_ms))
+
+    def _report(self, pose: PoseSample, window: Window, delta: StoreDelta) -> None:
+        for path, reason in delta.newly_corrupt:
+            rospy.logerr("skipping corrupt tile %s: %s", path, reason)
+        off_map = len(self.directory.existing_in(window)) == 0
+        if off_map:
+            i0, i1, j0, j1 = self.directory.bounds
+            rospy.logwarn_throttle(
+                WARN_PERIOD,
+                "pose (%.1f, %.1f) m is off the map: no tile in window i %d..%d, j %d..%d (the map spans"
+                " x %.0f..%.0f m, y %.0f..%.0f m); publishing an empty window until the pose returns",
+                pose.x,
+                pose.y,
+                *window.bounds,
+                i0 * self.s,
+                (i1 + 1) * self.s,
+                j0 * self.s,
+                (j1 + 1) * self.s,
+            )
+        elif self._off_map:
+            rospy.loginfo("pose (%.1f, %.1f) m is back on the map: %d tiles loaded", pose.x, pose.y, len(delta.added))
+        self._off_map = off_map
+
+    def send_reset(self, publish, increment: bool) -> int | None:
+        """Publishes the whole window as a reset delta through ``publish``; returns its revision, or
+        None before the first window. ``increment``: a broadcast delta (new revision) rather than a
+        catch-up for one new subscriber (current revision)."""
+        with self._lock:
+            if self._window is None:
+                return None
+            if increment:
+                self._revision += 1
+            header = stamped(self.frame)
+            publish(tile_delta(header, self._revision, True, self.s, self._window, self.store.loaded(), []))
+            return self._revision
+
+
+def main() -> None:
+    pin_mmap_threshold()
+    rospy.init_node("grid_puzzle_map_provider")
+    try:
+        config = load_config(lambda name, default: rospy.get_param("~" + name, default))
+        MapProviderNode(config)
+    except UserError as err:
+        rospy.logfatal("grid_puzzle_map_provider: %s", err)
+        sys.exit(2)
+    rospy.spin()

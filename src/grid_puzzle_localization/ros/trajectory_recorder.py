@@ -1,0 +1,63 @@
+"""Node that records an Odometry topic as a TUM trajectory, written when the node shuts down.
+
+Subscribes: ``odom`` (nav_msgs/Odometry). Parameters: ``~output`` (path of the TUM file).
+Optionally publishes ``~initial_pose`` (7 numbers x y z qx qy qz qw in ``~frame_id``, default
+``map``) once and latched on ``initialpose`` (geometry_msgs/PoseWithCovarianceStamped), which is how
+the experiment seeds the localizer and the map provider. Poses whose stamp does not increase (a bag
+restarted) are dropped and counted."""
+
+from __future__ import annotations
+
+import numpy as np
+import rospy
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry
+
+from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.evaluation.trajectory import make_trajectory, write_tum
+
+
+class TrajectoryRecorder:
+    def __init__(self, output: str):
+        self.output = output
+        self.rows: list[tuple[float, ...]] = []
+        self.dropped = 0
+        self.sub = rospy.Subscriber("odom", Odometry, self.on_odom, queue_size=100)
+
+    def on_odom(self, msg: Odometry) -> None:
+        p, q = msg.pose.pose.position, msg.pose.pose.orientation
+        t = msg.header.stamp.to_sec()
+        if self.rows and t <= self.rows[-1][0]:
+            self.dropped += 1
+            return
+        self.rows.append((t, p.x, p.y, p.z, q.x, q.y, q.z, q.w))
+
+    def write(self) -> None:
+        data = np.array(self.rows, dtype=np.float64).reshape(-1, 8)
+        write_tum(self.output, make_trajectory(data[:, 0], data[:, 1:4], data[:, 4:8], source="odom"))
+        rospy.loginfo(f"trajectory_recorder: wrote {len(data)} poses to {self.output} (dropped {self.dropped})")
+
+
+def initial_pose_message(values: list[float], frame_id: str) -> PoseWithCovarianceStamped:
+    if len(values) != 7:
+        raise UserError(f"~initial_pose needs 7 numbers x y z qx qy qz qw (got {values})")
+    msg = PoseWithCovarianceStamped()
+    msg.header.frame_id = frame_id
+    pose = msg.pose.pose
+    pose.position.x, pose.position.y, pose.position.z = values[:3]
+    pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = values[3:]
+    # 10 cm, 1 degree: the ground truth's first pose.
+    msg.pose.covariance = list(np.diag([0.01, 0.01, 0.01, 3e-4, 3e-4, 3e-4]).ravel())
+    return msg
+
+
+def main() -> None:
+    rospy.init_node("trajectory_recorder")
+    output = rospy.get_param("~output")
+    recorder = TrajectoryRecorder(output)
+    initial = rospy.get_param("~initial_pose", None)
+    if initial is not None:
+        pub = rospy.Publisher("initialpose", PoseWithCovarianceStamped, queue_size=1, latch=True)
+        pub.publish(initial_pose_message([float(v) for v in initial], rospy.get_param("~frame_id", "map")))
+    rospy.on_shutdown(recorder.write)
+    rospy.spin()

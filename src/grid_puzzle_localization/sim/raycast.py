@@ -1,0 +1,64 @@
+"""First-hit ray casting against a world mesh with Intel Embree (through the ``embreex`` bindings).
+
+Embree builds the BVH once; :meth:`RayCaster.cast` splits a batch over threads (embreex releases the
+GIL while tracing), so the result does not depend on the thread count.
+"""
+
+from __future__ import annotations
+
+import itertools
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+from embreex import rtcore_scene
+from embreex.mesh_construction import TriangleMesh
+
+from grid_puzzle_localization.sim.meshes import Mesh
+
+_MIN_RAYS_PER_THREAD = 20000
+
+
+class RayCaster:
+    """Casts rays against ``mesh``; ``threads`` worker threads share each batch."""
+
+    def __init__(self, mesh: Mesh, threads: int = 2) -> None:
+        self._scene = rtcore_scene.EmbreeScene()
+        # embreex keeps a reference to the triangle buffer it was given.
+        self._triangles = np.ascontiguousarray(mesh.triangles, dtype=np.float32)
+        TriangleMesh(self._scene, self._triangles)
+        self.threads = max(1, int(threads))
+        self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
+    def __enter__(self) -> RayCaster:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _cast(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        out = self._scene.run(origins, directions, output=1)
+        return out["tfar"], out["primID"]
+
+    def cast(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Distance along each unit ``direction`` to the first triangle [m] (inf on a miss) and the hit
+        triangle's index (-1 on a miss). ``origins`` and ``directions`` are (n, 3)."""
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        n = len(o)
+        parts = min(self.threads, max(1, n // _MIN_RAYS_PER_THREAD))
+        if parts == 1 or self._pool is None:
+            t, prim = self._cast(o, d)
+        else:
+            bounds = np.linspace(0, n, parts + 1).astype(int)
+            jobs = [self._pool.submit(self._cast, o[a:b], d[a:b]) for a, b in itertools.pairwise(bounds)]
+            results = [j.result() for j in jobs]
+            t = np.concatenate([r[0] for r in results])
+            prim = np.concatenate([r[1] for r in results])
+        prim = prim.astype(np.int64)
+        t = np.where(prim >= 0, t, np.inf).astype(np.float32)
+        return t, prim

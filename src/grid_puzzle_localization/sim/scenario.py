@@ -1,0 +1,250 @@
+"""One simulated scenario, end to end: world, trajectories, sweeps, IMU, prior map, output directory.
+
+The output directory holds ``scenario.yaml`` (every parameter and the seed), ``ground_truth.tum``
+(base_link in map, TUM format, 100 Hz), ``scenario.bag`` and ``global_map.pcd``. It is built in a
+hidden temporary directory beside the target and renamed into place only when complete, so an
+interrupt or a full disk never leaves a directory that looks finished. The same configuration gives
+byte-identical files: all randomness comes from ``seed`` and every bag stamp is set explicitly, starting
+at ``start_time`` (seconds since the epoch).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import shutil
+import sys
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import yaml
+from scipy.spatial.transform import Rotation
+from tqdm import tqdm
+
+from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.pcd import PcdStreamWriter
+from grid_puzzle_localization.sim.imu import ImuNoise, simulate_imu, true_motion
+from grid_puzzle_localization.sim.lidar import Mount, SweepSimulator
+from grid_puzzle_localization.sim.mapping import MAP_DTYPE, DriftBounds, VoxelMap, drifted, to_map
+from grid_puzzle_localization.sim.movers import Movers, make_movers
+from grid_puzzle_localization.sim.raycast import RayCaster
+from grid_puzzle_localization.sim.sensors import DEFAULT_SENSOR, get_sensor
+from grid_puzzle_localization.sim.trajectory import RATE, Trajectory, localization_trajectory, mapping_trajectory
+from grid_puzzle_localization.sim.worlds import check_world, make_world
+
+# base_link -> lidar per platform [m]: a backpack for the courtyard walk, a roof mount for the car.
+MOUNTS = {"courtyard": (0.2, 0.0, 1.3), "urban": (0.3, 0.0, 1.8)}
+DEFAULT_MAP_LEAF = {"courtyard": 0.05, "urban": 0.1}  # [m]
+GROUND_TRUTH_RATE = 100.0  # [Hz] ground_truth topic and ground_truth.tum
+FILES = ("scenario.yaml", "ground_truth.tum", "scenario.bag", "global_map.pcd")
+
+
+@dataclass(frozen=True)
+class ScenarioConfig:
+    """Parameters of ``gpm simulate``; None picks the world's default."""
+
+    world: str = "courtyard"
+    sensor: str | None = None  # hdl32 | livox
+    seed: int = 0
+    scale: float = 1.0  # world extent and route length factor, (0.2, 1]
+    duration: float | None = None  # [s] of the localization run; None: the whole route
+    map_leaf: float | None = None  # [m] voxel size of the prior map
+    start_time: float = 1.7e9  # [s] bag time of the first sample
+    threads: int = 2  # ray-casting threads (the output does not depend on it)
+    movers: int | None = None  # moving pedestrians/cars in the scans (not in the map); None: world default
+    drift: DriftBounds = field(default_factory=DriftBounds)
+    imu_noise: ImuNoise = field(default_factory=ImuNoise)
+
+    def resolved(self) -> ScenarioConfig:
+        """A copy with defaults filled in, after checking every parameter (UserError if bad)."""
+        sensor = self.sensor or DEFAULT_SENSOR[check_world(self.world)]
+        get_sensor(sensor)
+        if self.duration is not None and not (math.isfinite(self.duration) and self.duration >= 0.5):
+            raise UserError(f"--duration must be at least 0.5 s (got {self.duration}); for example --duration 30")
+        leaf = self.map_leaf if self.map_leaf is not None else DEFAULT_MAP_LEAF[self.world]
+        if not (0.01 <= leaf <= 2.0):
+            raise UserError(f"--map-density (voxel size) must be between 0.01 and 2 m (got {leaf})")
+        if self.seed < 0:
+            raise UserError(f"--seed must be a non-negative integer (got {self.seed})")
+        if self.threads < 1:
+            raise UserError(f"--threads must be at least 1 (got {self.threads})")
+        if self.movers is not None and self.movers < 0:
+            raise UserError(f"--movers must be a non-negative count (got {self.movers})")
+        return replace(self, sensor=sensor, map_leaf=leaf)
+
+
+@dataclass
+class Summary:
+    """What a run produced and how long each pass took (wall-clock seconds)."""
+
+    directory: Path
+    duration: float
+    sweeps: int
+    rays: int
+    points: int
+    map_sweeps: int
+    map_rays: int
+    map_points_in: int  # points accumulated into the voxel filter
+    map_points: int  # points in global_map.pcd
+    seconds_localization: float
+    seconds_mapping: float
+
+
+def _rng(seed: int, stream: int) -> np.random.Generator:
+    return np.random.default_rng([seed, stream])
+
+
+def _progress(total: int, desc: str, show: bool):
+    return tqdm(total=total, desc=desc, unit="sweep", file=sys.stderr, disable=not show, mininterval=1.0)
+
+
+def _write_tum(path: Path, t0: float, traj: Trajectory) -> None:
+    step = round(RATE / GROUND_TRUTH_RATE)
+    stamps = t0 + traj.times[::step]
+    data = np.column_stack([stamps, traj.position[::step], traj.quat[::step]])
+    np.savetxt(path, data, fmt=["%.6f"] + ["%.6f"] * 3 + ["%.9f"] * 4, header="timestamp tx ty tz qx qy qz qw")
+
+
+def _write_bag(
+    path: Path, cfg: ScenarioConfig, sim: SweepSimulator, traj: Trajectory, mount: Mount, movers: Movers, show: bool
+):
+    from grid_puzzle_localization.ros.bag_writer import BagNames, ScenarioBag
+
+    sensor, t0 = sim.sensor, cfg.start_time
+    imu = simulate_imu(traj, _rng(cfg.seed, 6), cfg.imu_noise)
+    gyro_true, _, velocity = true_motion(traj)
+    vel_body = Rotation.from_quat(traj.quat).inv().apply(velocity)
+    gyro_var = (cfg.imu_noise.gyro_noise_density**2) * RATE
+    accel_var = (cfg.imu_noise.accel_noise_density**2) * RATE
+    gt_step = round(RATE / GROUND_TRUTH_RATE)
+    samples_per_sweep = round(RATE / sensor.rate)
+    n_sweeps = int(np.floor(traj.duration * sensor.rate + 1e-9))
+    rng = _rng(cfg.seed, 4)
+    rays = points = 0
+    with ScenarioBag(str(path), BagNames()) as bag, _progress(n_sweeps, "localization run", show) as bar:
+        bag.write_tf_static(t0, mount.translation, Rotation.from_matrix(mount.rotation).as_quat())
+
+        def motion(i0: int, i1: int) -> None:
+            for i in range(i0, min(i1, len(traj.position))):
+                t = t0 + i / RATE
+                bag.write_imu(t, imu.gyro[i], imu.accel[i], gyro_var, accel_var)
+                if i % gt_step == 0:
+                    bag.write_ground_truth(t, traj.position[i], traj.quat[i], vel_body[i], gyro_true[i])
+
+        for k in range(n_sweeps):
+            motion(k * samples_per_sweep, (k + 1) * samples_per_sweep)
+            sweep = sensor.sweep(k)
+            t_mid = (k + 0.5) / sensor.rate
+            frozen = movers.mesh_at(t_mid, traj.interpolate(np.array([t_mid]))[0][0, :2])
+            cloud = sim.simulate(traj, k / sensor.rate, sweep, rng, frozen)
+            bag.write_points(t0 + k / sensor.rate, t0 + (k + 1) / sensor.rate, cloud)
+            rays += len(sweep.dt)
+            points += len(cloud)
+            bar.update()
+        motion(n_sweeps * samples_per_sweep, len(traj.position))
+    return n_sweeps, rays, points
+
+
+def _write_map(path: Path, cfg: ScenarioConfig, sim: SweepSimulator, traj: Trajectory, mount: Mount, show: bool):
+    estimate = drifted(traj, cfg.drift, _rng(cfg.seed, 3))
+    voxels = VoxelMap(cfg.map_leaf)
+    sensor = sim.sensor
+    rng = _rng(cfg.seed, 5)
+    n_sweeps = int(np.floor(traj.duration * sensor.rate + 1e-9))
+    rays = points = 0
+    with _progress(n_sweeps, "mapping run", show) as bar:
+        for k in range(n_sweeps):
+            sweep = sensor.sweep(k)
+            cloud = sim.simulate(traj, k / sensor.rate, sweep, rng)
+            voxels.add(to_map(estimate, mount, k / sensor.rate, cloud), cloud["intensity"])
+            rays += len(sweep.dt)
+            points += len(cloud)
+            bar.update()
+    with PcdStreamWriter(path, MAP_DTYPE) as writer:
+        for chunk in voxels.chunks():
+            writer.append(chunk)
+        count = writer.points
+    return n_sweeps, rays, points, count
+
+
+def _describe(cfg: ScenarioConfig, world, loc: Trajectory, mapping: Trajectory, mount: Mount, movers: Movers) -> dict:
+    sensor = get_sensor(cfg.sensor)
+    params = asdict(cfg)
+    params.pop("threads")
+    return {
+        "scenario": cfg.world,
+        "parameters": params,
+        "world": {"extent_m": [float(v) for v in world.extent], "triangles": len(world.mesh.faces)},
+        "sensor": {k: (v if not isinstance(v, float) else float(v)) for k, v in asdict(sensor).items()},
+        "mount_base_link_to_lidar": {
+            "translation_m": [float(v) for v in mount.translation],
+            "quaternion_xyzw": [0.0, 0.0, 0.0, 1.0],
+        },
+        "localization_run": {
+            "duration_s": float(loc.duration),
+            "length_m": round(loc.length(), 3),
+            "start_time_s": float(cfg.start_time),
+        },
+        "movers": {kind: movers.kinds.count(kind) for kind in sorted(set(movers.kinds))},
+        "mapping_run": {"duration_s": float(mapping.duration), "length_m": round(mapping.length(), 3)},
+        "frames": {"map": "map", "base": "base_link", "lidar": "lidar"},
+        "topics": {"points": "points", "imu": "imu", "ground_truth": "ground_truth", "tf_static": "/tf_static"},
+        "files": list(FILES),
+    }
+
+
+def generate(
+    cfg: ScenarioConfig, out_dir: str | os.PathLike, overwrite: bool = False, progress: bool = True
+) -> Summary:
+    """Simulates the scenario ``cfg`` into ``out_dir`` (must not exist unless ``overwrite``)."""
+    cfg = cfg.resolved()
+    world = make_world(cfg.world, cfg.seed, cfg.scale)
+    out = Path(out_dir).absolute()
+    if out.exists() and not overwrite:
+        raise UserError(f"output directory {out} already exists: choose another --output or pass --overwrite")
+    if not out.parent.is_dir():
+        raise UserError(f"cannot create {out}: parent directory {out.parent} does not exist")
+    loc = localization_trajectory(world, cfg.scale, _rng(cfg.seed, 1))
+    if cfg.duration is not None:
+        loc = loc.truncated(cfg.duration)
+    mapping = mapping_trajectory(world, loc, _rng(cfg.seed, 2))
+    movers = make_movers(world, cfg.scale, loc.duration, cfg.movers, _rng(cfg.seed, 7))
+    mount = Mount(np.array(MOUNTS[cfg.world]), np.eye(3))
+    tmp = out.parent / f".{out.name}.partial-{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir()
+    try:
+        with RayCaster(world.mesh, cfg.threads) as caster:
+            sim = SweepSimulator(world.mesh, caster, get_sensor(cfg.sensor), mount)
+            (tmp / "scenario.yaml").write_text(
+                yaml.safe_dump(_describe(cfg, world, loc, mapping, mount, movers), sort_keys=False)
+            )
+            _write_tum(tmp / "ground_truth.tum", cfg.start_time, loc)
+            start = time.perf_counter()
+            sweeps, rays, points = _write_bag(tmp / "scenario.bag", cfg, sim, loc, mount, movers, progress)
+            mid = time.perf_counter()
+            map_sweeps, map_rays, map_in, map_points = _write_map(
+                tmp / "global_map.pcd", cfg, sim, mapping, mount, progress
+            )
+            end = time.perf_counter()
+        for name in FILES:
+            os.chmod(tmp / name, 0o644)  # temporary files are created private
+            with open(tmp / name, "rb") as f:
+                os.fsync(f.fileno())
+        if out.exists():
+            trash = out.parent / f".{out.name}.old-{os.getpid()}"
+            os.rename(out, trash)
+            os.rename(tmp, out)
+            shutil.rmtree(trash)
+        else:
+            os.rename(tmp, out)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            shutil.rmtree(tmp)
+        raise
+    return Summary(
+        out, loc.duration, sweeps, rays, points, map_sweeps, map_rays, map_in, map_points, mid - start, end - mid
+    )

@@ -1,0 +1,260 @@
+// NDT localizer nodelet: PointCloud2 -> core Localizer -> Odometry, TF and status. All state and maths
+// live in the core (localizer.hpp); this file converts messages, looks up frames and publishes.
+#include <geometry_msgs/PoseWithCovarianceStamped.h>
+#include <nav_msgs/Odometry.h>
+#include <nodelet/nodelet.h>
+#include <ros/ros.h>
+#include <sensor_msgs/Imu.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <std_srvs/Trigger.h>
+#include <tf2_eigen/tf2_eigen.h>
+#include <tf2_ros/buffer.h>
+#include <tf2_ros/transform_broadcaster.h>
+#include <tf2_ros/transform_listener.h>
+
+#include <map>
+#include <memory>
+#include <optional>
+#include <pluginlib/class_list_macros.hpp>
+
+#include "grid_puzzle_localization/TileDelta.h"
+#include "grid_puzzle_localization/localizer.hpp"
+#include "grid_puzzle_localization/tile_delta_sequence.hpp"
+#include "localizer_params.hpp"
+#include "ndt_status_msg.hpp"
+#include "point_cloud_msg.hpp"
+
+namespace grid_puzzle_localization {
+
+class NdtLocalizerNodelet : public nodelet::Nodelet {
+ private:
+  void onInit() override {
+    // Scan, pose and IMU callbacks share the single-threaded queue (they touch the localizer state in
+    // order); map input uses the multi-threaded queue so converting a large map never delays a scan.
+    ros::NodeHandle& nh = getNodeHandle();
+    ros::NodeHandle& mt_nh = getMTNodeHandle();
+    ros::NodeHandle& pnh = getPrivateNodeHandle();
+    try {
+      params_ = loadLocalizerParams(pnh, getName());
+      localizer_ = std::make_unique<Localizer>(params_.core);
+    } catch (const std::invalid_argument& e) {
+      NODELET_FATAL("%s: %s", getName().c_str(), e.what());
+      throw;
+    }
+    if (params_.initial_pose) localizer_->setDefaultInitialPose(*params_.initial_pose);
+
+    tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
+    tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
+    tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
+    odom_pub_ = nh.advertise<nav_msgs::Odometry>("odom", 10);
+    status_pub_ = advertiseNdtStatus(pnh, "status");
+    if (params_.publish_aligned_points) aligned_pub_ = nh.advertise<sensor_msgs::PointCloud2>("aligned_points", 2);
+
+    if (params_.map_source == "cloud") {
+      map_sub_ = mt_nh.subscribe("map_cloud", 1, &NdtLocalizerNodelet::onMapCloud, this);
+    } else if (params_.map_source == "tiles") {
+      map_sub_ = mt_nh.subscribe("tile_delta", 100, &NdtLocalizerNodelet::onTileDelta, this);
+      resend_client_ = mt_nh.serviceClient<std_srvs::Trigger>(params_.resend_service);
+    } else {
+      localizer_->map().submit(MapChange::pcdFile(params_.pcd_path));
+    }
+    points_sub_ = nh.subscribe("points", 2, &NdtLocalizerNodelet::onPoints, this);
+    initial_pose_sub_ = nh.subscribe("initialpose", 1, &NdtLocalizerNodelet::onInitialPose, this);
+    imu_sub_ = nh.subscribe("imu", 200, &NdtLocalizerNodelet::onImu, this);
+    NODELET_INFO("%s: map source '%s', frames %s -> %s, resolution %.2f m, search %s", getName().c_str(),
+                 params_.map_source.c_str(), params_.map_frame.c_str(), params_.base_frame.c_str(),
+                 params_.core.ndt.resolution, toString(params_.core.ndt.search));
+  }
+
+  // --------------------------------------------------------------- map input (multi-threaded queue)
+  void onMapCloud(const sensor_msgs::PointCloud2::ConstPtr& msg) {
+    if (!checkMapFrame(msg->header.frame_id, "map_cloud")) return;
+    try {
+      localizer_->map().submit(MapChange::fullCloud(fromMsg(*msg)));
+    } catch (const std::invalid_argument& e) {
+      NODELET_ERROR("map_cloud: %s", e.what());
+    }
+  }
+
+  void onTileDelta(const TileDelta::ConstPtr& msg) {
+    if (!checkMapFrame(msg->header.frame_id, "tile_delta")) return;
+    if (msg->added_ids.size() != msg->added_clouds.size()) {
+      NODELET_ERROR("tile_delta revision %u: %zu added ids but %zu clouds; the provider must send one cloud per id",
+                    msg->revision, msg->added_ids.size(), msg->added_clouds.size());
+      return;
+    }
+    switch (tile_sequence_.accept(msg->revision, msg->reset)) {
+      case TileDeltaSequence::Verdict::kIgnore:
+        return;
+      case TileDeltaSequence::Verdict::kRequestResend: {
+        NODELET_WARN("tile_delta revision %u does not follow the last one applied: asking %s for the whole window",
+                     msg->revision, resend_client_.getService().c_str());
+        std_srvs::Trigger srv;
+        if (!resend_client_.call(srv) || !srv.response.success) {
+          tile_sequence_.resendFailed();
+          NODELET_ERROR_THROTTLE(5.0, "service %s failed (%s); is the tile provider running?",
+                                 resend_client_.getService().c_str(), srv.response.message.c_str());
+        }
+        return;
+      }
+      case TileDeltaSequence::Verdict::kApply:
+        break;
+    }
+    try {
+      std::vector<TileCloud> added(msg->added_ids.size());
+      for (std::size_t i = 0; i < added.size(); ++i) added[i] = {msg->added_ids[i], fromMsg(msg->added_clouds[i])};
+      localizer_->map().submit(MapChange::tiles(msg->reset, std::move(added), msg->removed_ids));
+    } catch (const std::invalid_argument& e) {
+      NODELET_ERROR("tile_delta revision %u: %s", msg->revision, e.what());
+    }
+  }
+
+  bool checkMapFrame(const std::string& frame, const char* topic) {
+    if (frame.empty() || frame == params_.map_frame) return true;
+    NODELET_ERROR_THROTTLE(5.0, "%s is in frame '%s' but ~map_frame is '%s'; publish the map in the map frame", topic,
+                           frame.c_str(), params_.map_frame.c_str());
+    return false;
+  }
+
+  // --------------------------------------------------------------- scan thread (single-threaded queue)
+  void onInitialPose(const geometry_msgs::PoseWithCovarianceStamped::ConstPtr& msg) {
+    if (!checkMapFrame(msg->header.frame_id, "initialpose")) return;
+    Eigen::Isometry3d pose;
+    tf2::fromMsg(msg->pose.pose, pose);
+    if (!pose.matrix().allFinite()) {
+      NODELET_ERROR("initialpose has a non-finite pose; ignored");
+      return;
+    }
+    localizer_->setInitialPose(pose);
+    NODELET_INFO("initial pose set to (%.2f, %.2f, %.2f)", pose.translation().x(), pose.translation().y(),
+                 pose.translation().z());
+  }
+
+  void onImu(const sensor_msgs::Imu::ConstPtr& msg) {
+    const std::optional<Eigen::Isometry3d> base_T_imu = staticTransform(msg->header.frame_id);
+    if (!base_T_imu) return;
+    Eigen::Vector3d w;
+    tf2::fromMsg(msg->angular_velocity, w);
+    localizer_->addGyro(msg->header.stamp.toSec(), base_T_imu->linear() * w);
+  }
+
+  void onPoints(const sensor_msgs::PointCloud2::ConstPtr& msg) {
+    for (const std::string& err : localizer_->map().takeErrors()) NODELET_ERROR("map update failed: %s", err.c_str());
+    const std::optional<Eigen::Isometry3d> base_T_sensor = staticTransform(msg->header.frame_id);
+    if (!base_T_sensor) return;
+    PointCloud scan;
+    try {
+      scan = fromMsg(*msg);
+    } catch (const std::invalid_argument& e) {
+      NODELET_ERROR_THROTTLE(5.0, "points (frame '%s'): %s", msg->header.frame_id.c_str(), e.what());
+      return;
+    }
+    const LocalizerOutput out = localizer_->processScan(msg->header.stamp.toSec(), scan, *base_T_sensor);
+    if (out.reset) NODELET_WARN("scan time went backwards (bag loop?): localizer reset");
+    reportState(out.state);
+    if (out.state != LocalizerState::kTracking) return;
+    if (!out.match_accepted)
+      NODELET_WARN_THROTTLE(2.0, "poor match (%s, NVTL %.2f, TP %.2f, %d iterations): publishing the prediction",
+                            toString(out.ndt.status), out.ndt.nvtl, out.ndt.transformation_probability,
+                            out.ndt.iterations);
+    publish(out, msg->header);
+  }
+
+  void reportState(LocalizerState state) {
+    if (state == last_state_) return;
+    last_state_ = state;
+    if (state == LocalizerState::kWaitingForMap)
+      NODELET_INFO("waiting for the map (map_source '%s')", params_.map_source.c_str());
+    else if (state == LocalizerState::kWaitingForInitialPose)
+      NODELET_INFO("waiting for an initial pose on %s (or set ~initial_pose)", initial_pose_sub_.getTopic().c_str());
+    else
+      NODELET_INFO("tracking");
+  }
+
+  /// base_T_frame from static TF, cached per frame; logs the frames on failure.
+  std::optional<Eigen::Isometry3d> staticTransform(const std::string& frame) {
+    const auto it = static_cache_.find(frame);
+    if (it != static_cache_.end()) return it->second;
+    try {
+      const geometry_msgs::TransformStamped t = tf_buffer_->lookupTransform(params_.base_frame, frame, ros::Time(0));
+      const Eigen::Isometry3d iso = tf2::transformToEigen(t);
+      static_cache_.emplace(frame, iso);
+      return iso;
+    } catch (const tf2::TransformException& e) {
+      NODELET_ERROR_THROTTLE(5.0, "no transform from '%s' to '%s' (%s); publish it as a static transform",
+                             frame.c_str(), params_.base_frame.c_str(), e.what());
+      return std::nullopt;
+    }
+  }
+
+  // --------------------------------------------------------------- output
+  void publish(const LocalizerOutput& out, const std_msgs::Header& scan_header) {
+    nav_msgs::Odometry odom;
+    odom.header.stamp = scan_header.stamp;
+    odom.header.frame_id = params_.map_frame;
+    odom.child_frame_id = params_.base_frame;
+    odom.pose.pose = tf2::toMsg(out.pose);
+    odom.twist.twist = tf2::toMsg(Eigen::Matrix<double, 6, 1>(out.twist));
+    for (int r = 0; r < 6; ++r)
+      for (int c = 0; c < 6; ++c) {
+        odom.pose.covariance[6 * r + c] = out.covariance(r, c);
+        odom.twist.covariance[6 * r + c] = out.twist_covariance(r, c);
+      }
+    odom_pub_.publish(odom);
+    if (params_.publish_tf) publishTf(out.pose, scan_header.stamp);
+
+    std_msgs::Header status_header = scan_header;
+    status_header.frame_id = params_.map_frame;
+    publishNdtStatus(status_pub_, status_header, summarize(out, localizer_->map().stats().update_ms),
+                     params_.map_source);
+
+    if (params_.publish_aligned_points && aligned_pub_.getNumSubscribers() > 0) {
+      std_msgs::Header h = scan_header;
+      h.frame_id = params_.map_frame;
+      aligned_pub_.publish(toMsg(out.aligned, h));
+    }
+  }
+
+  // map -> odom once someone publishes odom -> base_link (then for good), map -> base_link otherwise.
+  void publishTf(const Eigen::Isometry3d& map_T_base, const ros::Time& stamp) {
+    geometry_msgs::TransformStamped t;
+    t.header.stamp = stamp;
+    t.header.frame_id = params_.map_frame;
+    if (!params_.odom_frame.empty() && !odom_published_by_others_)
+      odom_published_by_others_ = tf_buffer_->canTransform(params_.odom_frame, params_.base_frame, ros::Time(0));
+    if (!odom_published_by_others_) {
+      t.child_frame_id = params_.base_frame;
+      t.transform = tf2::eigenToTransform(map_T_base).transform;
+      tf_broadcaster_->sendTransform(t);
+      return;
+    }
+    try {
+      const Eigen::Isometry3d odom_T_base =
+          tf2::transformToEigen(tf_buffer_->lookupTransform(params_.odom_frame, params_.base_frame, stamp));
+      t.child_frame_id = params_.odom_frame;
+      t.transform = tf2::eigenToTransform(map_T_base * odom_T_base.inverse()).transform;
+      tf_broadcaster_->sendTransform(t);
+    } catch (const tf2::TransformException& e) {
+      NODELET_WARN_THROTTLE(5.0, "no '%s' -> '%s' at the scan time (%s); map -> %s not published for this scan",
+                            params_.odom_frame.c_str(), params_.base_frame.c_str(), e.what(),
+                            params_.odom_frame.c_str());
+    }
+  }
+
+  LocalizerRosParams params_;
+  std::unique_ptr<Localizer> localizer_;
+  std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
+  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
+  std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
+  std::map<std::string, Eigen::Isometry3d> static_cache_;  // scan thread only
+  TileDeltaSequence tile_sequence_;                        // tile_delta callback only (never concurrent)
+  std::optional<LocalizerState> last_state_;               // for logging each state change once
+  bool odom_published_by_others_ = false;
+  ros::Publisher odom_pub_, status_pub_, aligned_pub_;
+  ros::Subscriber points_sub_, initial_pose_sub_, imu_sub_, map_sub_;
+  ros::ServiceClient resend_client_;
+};
+
+}  // namespace grid_puzzle_localization
+
+PLUGINLIB_EXPORT_CLASS(grid_puzzle_localization::NdtLocalizerNodelet, nodelet::Nodelet)

@@ -1,0 +1,163 @@
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <fstream>
+#include <map>
+#include <string>
+#include <thread>
+
+#include "grid_puzzle_localization/map_update_worker.hpp"
+#include "grid_puzzle_localization/ndt.hpp"
+#include "synthetic_world.hpp"
+
+namespace gpl = grid_puzzle_localization;
+
+namespace {
+
+gpl::PointCloud concat(const std::map<std::string, gpl::PointCloud>& tiles, const std::vector<std::string>& ids) {
+  gpl::PointCloud out;
+  for (const auto& id : ids) out.insert(out.end(), tiles.at(id).begin(), tiles.at(id).end());
+  return out;
+}
+
+// Voxel-by-voxel comparison of two snapshots: same voxels, same Gaussians to float tolerance.
+void expectSameMap(const gpl::VoxelMap& a, const gpl::VoxelMap& b) {
+  ASSERT_EQ(a.voxelCount(), b.voxelCount());
+  ASSERT_EQ(a.gaussianCount(), b.gaussianCount());
+  ASSERT_EQ(a.pointCount(), b.pointCount());
+  std::size_t checked = 0;
+  a.forEach([&](const gpl::VoxelKey& key, const gpl::VoxelStats& stats, const gpl::VoxelGaussian& g) {
+    const gpl::VoxelStats* other = b.stats(key);
+    ASSERT_NE(other, nullptr);
+    EXPECT_EQ(other->count, stats.count);
+    if (!g.valid) return;
+    const gpl::VoxelGaussian* h = b.find(key);
+    ASSERT_NE(h, nullptr);
+    EXPECT_LT((h->mean - g.mean).norm(), 1e-4f);
+    ++checked;
+  });
+  EXPECT_GT(checked, 100u);
+}
+
+void writeAsciiPcd(std::ostream& os, const gpl::PointCloud& cloud) {
+  os << "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH " << cloud.size()
+     << "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS " << cloud.size() << "\nDATA ascii\n";
+  for (const auto& p : cloud) os << p.x() << ' ' << p.y() << ' ' << p.z() << '\n';
+}
+
+}  // namespace
+
+TEST(MapUpdateWorker, TakeReadyHandsOutEachSnapshotOnce) {
+  gpl::MapUpdateWorker worker{gpl::VoxelMapParams()};
+  EXPECT_EQ(worker.takeReady(), nullptr);
+  worker.submit(gpl::MapChange::fullCloud(gpl::test::makeWorld()));
+  worker.waitIdle();
+  EXPECT_FALSE(worker.busy());
+  const auto snap = worker.takeReady();
+  ASSERT_NE(snap, nullptr);
+  EXPECT_GT(snap->gaussianCount(), 1000u);
+  EXPECT_EQ(worker.takeReady(), nullptr);
+  EXPECT_EQ(worker.stats().generation, 1u);
+}
+
+TEST(MapUpdateWorker, TileSequenceEqualsASynchronousBuildOfTheRemainingTiles) {
+  const auto tiles = gpl::test::cutTiles(gpl::test::makeWorld(), 10.0f);
+  std::vector<std::string> ids;
+  for (const auto& [id, cloud] : tiles) ids.push_back(id);
+  ASSERT_GE(ids.size(), 20u);
+  gpl::MapUpdateWorker worker{gpl::VoxelMapParams()};
+  auto tileCloud = [&](const std::string& id) { return gpl::TileCloud{id, tiles.at(id)}; };
+  // Window 1: first 12 tiles (reset), then slide: drop 4, add 4, replace one in place, remove an unknown id.
+  std::vector<gpl::TileCloud> first;
+  for (int i = 0; i < 12; ++i) first.push_back(tileCloud(ids[i]));
+  worker.submit(gpl::MapChange::tiles(true, first, {}));
+  worker.submit(gpl::MapChange::tiles(false, {tileCloud(ids[12]), tileCloud(ids[13]), tileCloud(ids[14])},
+                                      {ids[0], ids[1], ids[2], "not_loaded"}));
+  worker.submit(gpl::MapChange::tiles(false, {tileCloud(ids[5]), tileCloud(ids[15])}, {ids[3]}));
+  worker.waitIdle();
+  const auto incremental = worker.takeReady();
+  ASSERT_NE(incremental, nullptr);
+  EXPECT_EQ(worker.stats().tiles, 12u);
+
+  gpl::NdtTarget reference{gpl::VoxelMapParams()};
+  std::vector<std::string> remaining;
+  for (int i = 4; i <= 15; ++i) remaining.push_back(ids[i]);
+  reference.setTarget(concat(tiles, remaining));
+  expectSameMap(*incremental, *reference.snapshot());
+
+  // And the same alignment result on both.
+  const gpl::NdtAligner aligner;
+  const Eigen::Isometry3d truth = gpl::test::poseXYYaw(-5.0, 0.0, 0.1, 1.5);
+  const gpl::PointCloud scan = gpl::test::scanFrom(concat(tiles, remaining), truth, 25.0f, 0.01f, 1);
+  const Eigen::Isometry3f guess = (gpl::test::poseXYYaw(0.3, -0.2, 0.05) * truth).cast<float>();
+  const gpl::NdtResult a = aligner.align(*incremental, scan, guess);
+  const gpl::NdtResult b = aligner.align(*reference.snapshot(), scan, guess);
+  EXPECT_LT((a.transform - b.transform).norm(), 1e-4f);
+  EXPECT_EQ(a.iterations, b.iterations);
+  // A reset drops everything loaded before.
+  worker.submit(gpl::MapChange::tiles(true, {tileCloud(ids[0])}, {}));
+  worker.waitIdle();
+  EXPECT_EQ(worker.takeReady()->pointCount(), tiles.at(ids[0]).size());
+}
+
+TEST(MapUpdateWorker, AlignRunsAgainstTheOldSnapshotWhileAnUpdateIsBlocked) {
+  // The worker reads a PCD from a FIFO that this test has not written yet, so the update is pending
+  // for as long as the test wants, deterministically.
+  const gpl::PointCloud world = gpl::test::makeWorld();
+  gpl::MapUpdateWorker worker{gpl::VoxelMapParams()};
+  worker.submit(gpl::MapChange::fullCloud(world));
+  worker.waitIdle();
+  const auto old_map = worker.takeReady();
+  ASSERT_NE(old_map, nullptr);
+
+  char dir_template[] = "/tmp/gpl_worker_XXXXXX";
+  ASSERT_NE(mkdtemp(dir_template), nullptr);
+  const std::string fifo = std::string(dir_template) + "/map.pcd";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  worker.submit(gpl::MapChange::pcdFile(fifo));
+
+  const gpl::NdtAligner aligner;
+  const Eigen::Isometry3d truth = gpl::test::poseXYYaw(2.0, 1.0, 0.2, 1.5);
+  const gpl::PointCloud scan = gpl::test::scanFrom(world, truth, 25.0f, 0.01f, 2);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_TRUE(worker.busy());
+    EXPECT_EQ(worker.takeReady(), nullptr);
+    const gpl::NdtResult r = aligner.align(*old_map, scan, truth.cast<float>());
+    EXPECT_LT((r.transform - truth.cast<float>().matrix()).norm(), 0.05f);
+  }
+  gpl::PointCloud shifted = world;
+  for (auto& p : shifted) p.x() += 100.0f;
+  {
+    std::ofstream out(fifo);
+    writeAsciiPcd(out, shifted);
+  }
+  worker.waitIdle();
+  const auto new_map = worker.takeReady();
+  ASSERT_NE(new_map, nullptr);
+  EXPECT_EQ(new_map->pointCount(), world.size());
+  EXPECT_NE(new_map->stats(new_map->keyOf(shifted.front())), nullptr);
+  EXPECT_EQ(new_map->stats(new_map->keyOf(world.front())), nullptr);
+  EXPECT_EQ(old_map->pointCount(), world.size());  // the old snapshot is untouched
+  std::remove(fifo.c_str());
+  rmdir(dir_template);
+}
+
+TEST(MapUpdateWorker, UnreadablePcdIsReportedWithItsPathAndKeepsTheTarget) {
+  gpl::MapUpdateWorker worker{gpl::VoxelMapParams()};
+  worker.submit(gpl::MapChange::fullCloud(gpl::test::makeWorld()));
+  worker.submit(gpl::MapChange::pcdFile("/nonexistent/map.pcd"));
+  worker.waitIdle();
+  const auto errors = worker.takeErrors();
+  ASSERT_EQ(errors.size(), 1u);
+  EXPECT_NE(errors[0].find("/nonexistent/map.pcd"), std::string::npos);
+  EXPECT_GT(worker.takeReady()->gaussianCount(), 1000u);
+  EXPECT_TRUE(worker.takeErrors().empty());
+}
+
+TEST(MapUpdateWorker, RejectsBadParams) {
+  gpl::VoxelMapParams p;
+  p.resolution = -1.0;
+  EXPECT_THROW(gpl::MapUpdateWorker{p}, std::invalid_argument);
+}

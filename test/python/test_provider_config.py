@@ -1,0 +1,62 @@
+"""The provider's parameters: the YAML documents exactly the dataclass defaults; loading and checking."""
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.provider_config import ProviderConfig, load_config, parameter_defaults
+
+YAML = Path(__file__).resolve().parents[2] / "config" / "grid_puzzle_map_provider.yaml"
+
+
+def flatten(d, prefix=""):
+    out = {}
+    for key, value in d.items():
+        if isinstance(value, dict):
+            out.update(flatten(value, f"{prefix}{key}/"))
+        else:
+            out[prefix + key] = value
+    return out
+
+
+def test_yaml_documents_every_parameter_with_its_default():
+    documented = flatten(yaml.safe_load(YAML.read_text()))
+    assert documented == parameter_defaults()
+    for line in YAML.read_text().splitlines():
+        if ":" in line and not line.lstrip().startswith("#") and not line.rstrip().endswith(":"):
+            assert "#" in line, f"parameter line without a comment: {line}"
+
+
+def test_load_config_reads_groups_and_converts_types():
+    given = {"tiles/dir": "/maps/t", "window/n": 17, "tiles/cache_mb": 8, "publish_map_cloud": False}
+    cfg = load_config(lambda name, default: given.get(name, default))
+    assert cfg.tiles.dir == "/maps/t" and cfg.window.n == 17 and cfg.tiles.cache_mb == 8.0
+    assert isinstance(cfg.tiles.cache_mb, float) and cfg.publish_map_cloud is False
+    assert cfg.checked().window.k == 20
+
+
+@pytest.mark.parametrize(
+    ("given", "match"),
+    [
+        ({"window/n": "many"}, "window/n must be a int"),
+        ({"publish_map_cloud": 1}, "publish_map_cloud must be a bool"),
+    ],
+)
+def test_wrong_types_name_the_parameter(given, match):
+    with pytest.raises(UserError, match=match):
+        load_config(lambda name, default: given.get(name, default))
+
+
+@pytest.mark.parametrize(
+    ("config", "match"),
+    [
+        (ProviderConfig(), "tiles/dir is empty"),
+        (ProviderConfig(pose_source="gps", tiles=ProviderConfig().tiles.__class__(dir="x")), "pose_source"),
+        (ProviderConfig(tiles=ProviderConfig().tiles.__class__(dir="x", grid_size=-1.0)), "grid_size"),
+    ],
+)
+def test_checked_rejects_bad_values(config, match):
+    with pytest.raises(UserError, match=match):
+        config.checked()

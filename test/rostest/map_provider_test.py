@@ -1,0 +1,235 @@
+#!/usr/bin/env python3
+"""Runs grid_puzzle_map_provider on a small tiled map written into a temp dir and drives poses along a
+path with turns. Checks the deltas, the merged map_cloud and the status against a brute-force selection
+over the directory listing, and the standing start, a corrupt tile, late subscribers, ~resend, a pose
+far off the map and a missing tile directory."""
+
+import math
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import unittest
+
+import numpy as np
+import rospkg
+import rospy
+import rostest
+from grid_puzzle_localization.msg import ProviderStatus, TileDelta
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import PointCloud2
+from std_srvs.srv import Trigger
+
+from grid_puzzle_localization.grid import parse_tile_stem, tile_filename
+from grid_puzzle_localization.pcd import read_pcd
+from grid_puzzle_localization.ros.cloud_msg import cloud_to_array
+from grid_puzzle_localization.synthetic_tiles import write_tiles
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "python"))
+from tile_truth import brute_force_window_files
+
+PKG = "grid_puzzle_localization"
+S, N, K = 2.0, 1, 2
+CORRUPT = (8, 2)  # on the first leg of the path
+WAIT = 30.0  # [s] upper bound on waiting for a message (never asserted as a time)
+LATE_SUBSCRIBER = """
+import rospy
+from grid_puzzle_localization.msg import TileDelta
+rospy.init_node("late_subscriber", anonymous=True)
+m = rospy.wait_for_message("/tile_delta", TileDelta, 30.0)
+print(m.reset)
+print(m.revision)
+print(" ".join(m.added_ids))
+"""
+
+
+def expected_bounds(x, y, heading_deg):
+    """The window written out from Table I by hand: Δ per axis in units of k, heading in degrees."""
+    i, j = math.floor(x / S), math.floor(y / S)
+    if heading_deg is None:
+        return (i - N, i + N, j - N, j + N)
+    d = (heading_deg + 20.0) % 360.0 - 20.0
+    table = [(20, 1, 0, 0, 0), (70, 1, 0, 1, 0), (110, 0, 0, 1, 0), (160, 0, -1, 1, 0)]
+    table += [(200, 0, -1, 0, 0), (250, 0, -1, 0, -1), (290, 0, 0, 0, -1), (340, 1, 0, 0, -1)]
+    for hi, du_max, du_min, dv_max, dv_min in table:
+        if d < hi:
+            return (i - N + du_min * K, i + N + du_max * K, j - N + dv_min * K, j + N + dv_max * K)
+    raise AssertionError(d)
+
+
+def tile_file_points(directory, key):
+    return read_pcd(os.path.join(directory, tile_filename(*key, S))).points
+
+
+def xyz_sorted(points):
+    xyz = np.stack([points["x"], points["y"], points["z"]], axis=1).astype(np.float64)
+    return xyz[np.lexsort(xyz.T[::-1])]
+
+
+class Recorder:
+    def __init__(self, topic, kind):
+        self.messages = []
+        self.cond = threading.Condition()
+        self.sub = rospy.Subscriber(topic, kind, self._on, queue_size=100)
+
+    def _on(self, msg):
+        with self.cond:
+            self.messages.append(msg)
+            self.cond.notify_all()
+
+    def wait_for(self, predicate, what):
+        with self.cond:
+            ok = self.cond.wait_for(lambda: any(predicate(m) for m in self.messages), WAIT)
+        if not ok:
+            raise AssertionError(f"no message {what} within {WAIT} s")
+        return next(m for m in reversed(self.messages) if predicate(m))
+
+
+class MapProviderTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("map_provider_test")
+        cls.dir = tempfile.mkdtemp(prefix="gpm_tiles_")
+        rng = np.random.default_rng(4)
+        keys = [(i, j) for i in range(20) for j in range(20) if rng.random() > 0.2 or (i, j) == CORRUPT]
+        write_tiles(cls.dir, keys, S, count=30, seed=7)
+        corrupt = os.path.join(cls.dir, tile_filename(*CORRUPT, S))
+        with open(corrupt, "r+b") as f:
+            f.truncate(os.path.getsize(corrupt) - 5)
+        cls.corrupt_path = corrupt
+        for name, value in {"tiles/dir": cls.dir, "tiles/grid_size": S, "window/n": N, "window/k": K}.items():
+            rospy.set_param(f"/provider/{name}", value)
+        cls.deltas = Recorder("/tile_delta", TileDelta)
+        cls.clouds = Recorder("/map_cloud", PointCloud2)
+        cls.status = Recorder("/provider/status", ProviderStatus)
+        script = os.path.join(rospkg.RosPack().get_path(PKG), "scripts", "grid_puzzle_map_provider")
+        cls.proc = subprocess.Popen([sys.executable, script, "__name:=provider", "odom:=/odom"])
+        cls.odom = rospy.Publisher("/odom", Odometry, queue_size=100)
+        deadline = time.monotonic() + WAIT
+        while (cls.odom.get_num_connections() == 0 or cls.deltas.sub.get_num_connections() == 0) and (
+            time.monotonic() < deadline
+        ):
+            rospy.sleep(0.1)
+        cls.mirror = {}
+        cls.last_revision = 0
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.proc.terminate()
+        cls.proc.wait(timeout=WAIT)
+        shutil.rmtree(cls.dir, ignore_errors=True)
+
+    def send(self, x, y):
+        msg = Odometry()
+        msg.header.frame_id = "map"
+        msg.header.stamp = rospy.Time.now()
+        msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
+        msg.pose.pose.orientation.w = 1.0
+        self.odom.publish(msg)
+
+    def apply_new_deltas(self):
+        """Replays unseen deltas into the mirror, checking revision order and each delta's tiles."""
+        with self.deltas.cond:
+            new = [d for d in self.deltas.messages if d.revision > MapProviderTest.last_revision]
+        for d in new:
+            self.assertEqual(d.revision, MapProviderTest.last_revision + 1)
+            MapProviderTest.last_revision = d.revision
+            if d.reset:
+                self.mirror.clear()
+            for tile_id in d.removed_ids:
+                del self.mirror[parse_tile_stem(tile_id, S)]
+            for tile_id, cloud in zip(d.added_ids, d.added_clouds, strict=True):
+                key = parse_tile_stem(tile_id, S)
+                points = cloud_to_array(cloud)
+                self.assertEqual(points.tobytes(), tile_file_points(self.dir, key).tobytes())
+                self.mirror[key] = points
+            truth = brute_force_window_files(self.dir, (d.i_min, d.i_max, d.j_min, d.j_max), S) - {CORRUPT}
+            self.assertEqual(set(self.mirror), truth, f"delta {d.revision}")
+        return new
+
+    def assert_map_cloud_is(self, keys):
+        expected = [tile_file_points(self.dir, k) for k in sorted(keys)]
+        want = xyz_sorted(np.concatenate(expected)) if expected else np.empty((0, 3))
+
+        def matches(cloud):
+            return cloud.header.frame_id == "map" and np.array_equal(xyz_sorted(cloud_to_array(cloud)), want)
+
+        self.clouds.wait_for(matches, f"map_cloud holding exactly the {len(keys)} tiles of the window")
+
+    def test_1_standing_start_is_one_plain_square(self):
+        for _ in range(10):
+            self.send(5.3, 5.3)
+            rospy.sleep(0.1)
+        first = self.deltas.wait_for(lambda d: d.revision == 1, "revision 1")
+        rospy.sleep(1.0)  # give a wrong second delta the chance to show up
+        self.assertTrue(first.reset)
+        self.assertEqual((first.i_min, first.i_max, first.j_min, first.j_max), expected_bounds(5.3, 5.3, None))
+        self.assertEqual(len(self.apply_new_deltas()), 1)
+        status = self.status.wait_for(lambda m: True, "status")
+        self.assertEqual(status.sector, -1)
+        self.assertTrue(math.isnan(status.theta))
+        self.assertEqual(status.tiles_loaded, len(self.mirror))
+        self.assert_map_cloud_is(set(self.mirror))
+
+    def test_2_drive_with_turns(self):
+        legs = [((5.3, 5.3), (25.3, 5.3)), ((25.3, 5.3), (25.3, 21.3)), ((25.3, 21.3), (9.3, 37.3))]
+        for (x0, y0), (x1, y1) in legs:
+            steps = int(math.hypot(x1 - x0, y1 - y0) / 1.5)
+            for t in range(1, steps + 1):
+                self.send(x0 + (x1 - x0) * t / steps, y0 + (y1 - y0) * t / steps)
+                rospy.sleep(0.1)
+        final = expected_bounds(9.3, 37.3, 135.0)
+        self.deltas.wait_for(lambda d: (d.i_min, d.i_max, d.j_min, d.j_max) == final, f"final window {final}")
+        self.assertGreater(len(self.apply_new_deltas()), 5)
+        self.assert_map_cloud_is(set(self.mirror))
+        status = self.status.wait_for(lambda m: (m.i_min, m.i_max, m.j_min, m.j_max) == final, "final status")
+        self.assertEqual(status.sector, 3)
+        self.assertAlmostEqual(math.degrees(status.theta), 135.0, places=6)
+        self.assertEqual(list(status.corrupt_tiles), [self.corrupt_path])
+        self.assertEqual(status.tiles_loaded, len(self.mirror))
+        self.assertEqual(status.points, sum(len(p) for p in self.mirror.values()))
+
+    def test_3_late_subscriber_gets_a_reset_and_resend_broadcasts_one(self):
+        # A subscriber in another process: rospy shares one connection among a process's subscribers.
+        late = subprocess.run([sys.executable, "-c", LATE_SUBSCRIBER], capture_output=True, text=True, timeout=WAIT)
+        self.assertEqual(late.returncode, 0, late.stderr)
+        reset, revision, ids = late.stdout.split("\n")[:3]
+        self.assertEqual(reset, "True")
+        self.assertEqual(int(revision), MapProviderTest.last_revision)
+        self.assertEqual({parse_tile_stem(t, S) for t in ids.split()}, set(self.mirror))
+        rospy.wait_for_service("/provider/resend", WAIT)
+        reply = rospy.ServiceProxy("/provider/resend", Trigger)()
+        self.assertTrue(reply.success, reply.message)
+        resent = self.deltas.wait_for(lambda d: d.revision == MapProviderTest.last_revision + 1, "resend")
+        self.assertTrue(resent.reset)
+        self.apply_new_deltas()
+
+    def test_4_far_off_the_map_gives_an_empty_window_then_recovers(self):
+        self.send(5000.0, 5000.0)
+        self.deltas.wait_for(lambda d: d.i_min > 2000 and not d.added_ids, "an empty window far away")
+        self.apply_new_deltas()
+        self.assertEqual(self.mirror, {})
+        self.assert_map_cloud_is(set())
+        self.send(5.3, 5.3)
+        back = expected_bounds(5.3, 5.3, 225.0)
+        self.deltas.wait_for(lambda d: (d.i_min, d.i_max, d.j_min, d.j_max) == back, "the window back home")
+        self.apply_new_deltas()
+        self.assertTrue(self.mirror)
+        self.assert_map_cloud_is(set(self.mirror))
+
+    def test_5_missing_tile_directory_exits_with_a_clear_message(self):
+        rospy.set_param("/broken_provider/tiles/dir", os.path.join(self.dir, "nope"))
+        rospy.set_param("/broken_provider/tiles/grid_size", S)
+        script = os.path.join(rospkg.RosPack().get_path(PKG), "scripts", "grid_puzzle_map_provider")
+        done = subprocess.run(
+            [sys.executable, script, "__name:=broken_provider"], capture_output=True, text=True, timeout=WAIT
+        )
+        self.assertEqual(done.returncode, 2)
+        self.assertIn("does not exist", done.stdout + done.stderr)
+
+
+if __name__ == "__main__":
+    rostest.rosrun(PKG, "map_provider", MapProviderTest)
