@@ -27,8 +27,8 @@ class TileData:
     i: int
     j: int
     points: int
-    bounds_min: np.ndarray
-    bounds_max: np.ndarray
+    bounds_min: list[float]  # x, y, z [m]
+    bounds_max: list[float]
     spill: Path | None
     parts: list[np.ndarray]
 
@@ -72,17 +72,11 @@ class TileBuffer:
         """Every tile seen, in (i, j) order. The buffer is empty afterwards."""
         buffered = {(i, j): parts for i, j, parts in self._buffered()}
         self._clear()
-        for row in self._stats:
-            key = (int(row["i"]), int(row["j"]))
-            yield TileData(
-                i=key[0],
-                j=key[1],
-                points=int(row["count"]),
-                bounds_min=row["min"],
-                bounds_max=row["max"],
-                spill=self._spill_path(*key) if key in self._spilled else None,
-                parts=buffered.get(key, []),
-            )
+        stats = self._stats  # columns to lists once: iterating numpy rows costs microseconds each
+        columns = zip(*(stats[name].tolist() for name in ("i", "j", "count", "min", "max")), strict=True)
+        for i, j, count, low, high in columns:
+            spill = self._spill_path(i, j) if (i, j) in self._spilled else None
+            yield TileData(i, j, count, low, high, spill, buffered.get((i, j), []))
 
     def _buffered(self) -> Iterator[tuple[int, int, list[np.ndarray]]]:
         """(i, j, byte slices in input order) per buffered tile; folds the rows into the statistics."""

@@ -178,7 +178,7 @@ def _tile_index(
                 file=name,
                 center=(tile_center(t.i, s), tile_center(t.j, s)),
                 points=t.points,
-                bounds={"min": t.bounds_min.tolist(), "max": t.bounds_max.tolist()},
+                bounds={"min": t.bounds_min, "max": t.bounds_max},
                 bytes=len(text) + t.points * record,
                 data_bytes=t.points * record,
             )
