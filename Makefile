@@ -1,7 +1,7 @@
 # A new user needs two commands: `make demo` and `make test`. Both install and build what they need.
 SHELL := /bin/bash
 ROOT := $(abspath $(dir $(lastword $(MAKEFILE_LIST))))
-SETUP := source $(ROOT)/tools/env.sh && source $(ROOT)/.catkin_ws/devel/setup.bash &&
+SETUP := source $(ROOT)/tools/env.sh && source $(ROOT)/build/setup.bash &&
 CXX_SOURCES = $(shell git -C $(ROOT) ls-files '*.cpp' '*.hpp' '*.h')
 PY_SOURCES = src scripts test bench tools
 
@@ -30,7 +30,7 @@ demo: build
 	@$(SETUP) bash $(ROOT)/tools/demo.sh
 
 clean:
-	rm -rf $(ROOT)/.catkin_ws $(ROOT)/test_results
+	source $(ROOT)/tools/env.sh && rm -rf "$$GPL_WS" $(ROOT)/build $(ROOT)/test_results
 
 # ---- tiling benchmark (issue 2) ----
 .PHONY: bench-tiling
@@ -44,33 +44,33 @@ bench-provider: build
 .PHONY: bench-ndt tsan
 
 # Builds bench/bench_ndt.cpp in the catkin workspace and prints one JSON line per configuration.
-# Build output goes to .catkin_ws/bench_ndt_build.log so stdout holds only the JSON lines.
+# Build output goes to build/bench_ndt_build.log so stdout holds only the JSON lines.
 bench-ndt: setup
-	@log=$(ROOT)/.catkin_ws/bench_ndt_build.log; mkdir -p $(ROOT)/.catkin_ws; \
-	  { bash $(ROOT)/tools/build.sh && $(SETUP) cd $(ROOT)/.catkin_ws && catkin_make -j2 bench_ndt; } >$$log 2>&1 \
+	@log=$(ROOT)/build/bench_ndt_build.log; mkdir -p $(ROOT)/build; \
+	  { bash $(ROOT)/tools/build.sh && $(SETUP) cd $$GPL_WS && catkin_make -j2 bench_ndt; } >$$log 2>&1 \
 	  || { tail -40 $$log; exit 1; }
-	@$(SETUP) $(ROOT)/.catkin_ws/devel/lib/grid_puzzle_localization/bench_ndt
+	@$(SETUP) $$GPL_WS/devel/lib/grid_puzzle_localization/bench_ndt
 
 # ThreadSanitizer run of the snapshot/background-update test in its own plain CMake build dir.
 tsan: setup
-	cmake -S $(ROOT)/test/tsan -B $(ROOT)/.catkin_ws/build_tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
-	cmake --build $(ROOT)/.catkin_ws/build_tsan -j2
-	TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(ROOT)/.catkin_ws/build_tsan/test_ndt_concurrency_tsan
+	cmake -S $(ROOT)/test/tsan -B $(ROOT)/build/build_tsan -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+	cmake --build $(ROOT)/build/build_tsan -j2
+	TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(ROOT)/build/build_tsan/test_ndt_concurrency_tsan
 
 # ---------------------------------------------------------------- NDT localizer (issue 4)
 .PHONY: bench-localizer tsan-localizer
-# Build output goes to .catkin_ws/bench_localizer_build.log so stdout holds only the JSON lines.
+# Build output goes to build/bench_localizer_build.log so stdout holds only the JSON lines.
 bench-localizer: setup
-	@log=$(ROOT)/.catkin_ws/bench_localizer_build.log; mkdir -p $(ROOT)/.catkin_ws; \
+	@log=$(ROOT)/build/bench_localizer_build.log; mkdir -p $(ROOT)/build; \
 	  bash $(ROOT)/tools/build.sh >$$log 2>&1 || { tail -40 $$log; exit 1; }
 	@$(SETUP) python3 $(ROOT)/bench/bench_localizer.py
 
 # ThreadSanitizer build of the ROS-free localizer core (update worker, NDT target, localizer) and its
 # gtests in a separate build tree (see test/tsan_localizer); roscpp itself is not instrumented.
 tsan-localizer: setup
-	cmake -S $(ROOT)/test/tsan_localizer -B $(ROOT)/.catkin_ws/build_tsan_localizer -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
-	cmake --build $(ROOT)/.catkin_ws/build_tsan_localizer -j2
-	cd $(ROOT) && TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(ROOT)/.catkin_ws/build_tsan_localizer/tsan_localizer_tests
+	cmake -S $(ROOT)/test/tsan_localizer -B $(ROOT)/build/build_tsan_localizer -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+	cmake --build $(ROOT)/build/build_tsan_localizer -j2
+	cd $(ROOT) && TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(ROOT)/build/build_tsan_localizer/tsan_localizer_tests
 # --- scenario simulator (gpm simulate) ---
 .PHONY: bench-sim
 bench-sim: build

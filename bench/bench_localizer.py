@@ -50,7 +50,7 @@ def main() -> int:
     parser.add_argument("--tile-size", type=float, default=10.0, help="tile side [m] (default 10)")
     parser.add_argument("--window", type=int, default=3, help="tiles on each side of the vehicle (default 3)")
     parser.add_argument("--threads", type=int, help="NDT OpenMP threads, 0 = all cores (default: the localizer's)")
-    workspace = Path(os.environ.get("GPL_WS", ROOT / ".catkin_ws"))
+    workspace = Path(os.environ["GPL_WS"])  # exported by tools/env.sh (the Makefile sources it)
     parser.add_argument("--exe", type=Path, default=workspace / "devel/lib/grid_puzzle_localization/bench_localizer")
     args = parser.parse_args()
     # Other processes compete for the cores: the load average says how much (latency tails depend on it).

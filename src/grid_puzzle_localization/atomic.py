@@ -1,8 +1,10 @@
-"""Atomic file writes: a temporary file in the destination directory, then os.replace."""
+"""Atomic writes: a temporary file (or directory) beside the destination, then os.replace, so a
+reader never sees a half-written file and a failure or interrupt leaves the old content in place."""
 
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -15,19 +17,44 @@ os.umask(_UMASK)
 
 
 @contextmanager
-def atomic_write(path: str | os.PathLike, mode: str = "w", **open_kwargs) -> Iterator[IO]:
+def atomic_write(path: str | os.PathLike, mode: str = "w", fsync: bool = True, **open_kwargs) -> Iterator[IO]:
     """Opens a temporary file beside ``path``; on a clean exit it replaces ``path``, on an exception
-    it is removed, so ``path`` is never half-written."""
+    it is removed, so ``path`` is never half-written. ``fsync=False`` skips the flush to disk for bulk
+    writes whose directory is itself published atomically (see atomic_directory)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, mode, **open_kwargs) as f:
             yield f
-            f.flush()
-            os.fsync(f.fileno())
+            if fsync:
+                f.flush()
+                os.fsync(f.fileno())
         os.chmod(tmp, 0o666 & ~_UMASK)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+@contextmanager
+def atomic_directory(target: str | os.PathLike) -> Iterator[Path]:
+    """Yields an empty temporary directory beside ``target``; on a clean exit it replaces ``target``
+    (an existing one is moved aside first, then deleted), on an exception it is removed. Callers check
+    beforehand whether replacing an existing ``target`` is allowed."""
+    target = Path(target)
+    parent = target.resolve().parent
+    tmp = Path(tempfile.mkdtemp(dir=parent, prefix=f".{target.name}.tmp-"))
+    try:
+        yield tmp
+        os.chmod(tmp, 0o777 & ~_UMASK)  # mkdtemp makes it private
+        if target.exists():
+            old = Path(tempfile.mkdtemp(dir=parent, prefix=f".{target.name}.old-"))
+            os.replace(target, old / target.name)
+            os.replace(tmp, target)
+            shutil.rmtree(old)
+        else:
+            os.replace(tmp, target)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -13,11 +13,8 @@ reader ever sees a partly written directory, and a failed write leaves the old o
 
 from __future__ import annotations
 
-import contextlib
 import os
-import shutil
-import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,6 +22,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from grid_puzzle_localization.atomic import atomic_directory
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array
 
@@ -71,30 +69,6 @@ def _to_record(points: np.ndarray) -> np.ndarray:
     return record
 
 
-@contextlib.contextmanager
-def atomic_directory(target: Path, overwrite: bool) -> Iterator[Path]:
-    """Yields an empty temporary directory beside ``target``; on success it replaces ``target``."""
-    target = Path(target)
-    if target.exists() and not overwrite:
-        raise UserError(f"output directory {target} exists; remove it or pass --overwrite")
-    parent = target.parent if str(target.parent) else Path(".")
-    if not parent.is_dir():
-        raise UserError(f"cannot write {target}: its parent directory {parent} does not exist; create it first")
-    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.tmp-", dir=parent))
-    try:
-        yield tmp
-        old = None
-        if target.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=parent))
-            os.replace(target, old / "dir")
-        os.replace(tmp, target)
-        if old is not None:
-            shutil.rmtree(old)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-
-
 def write_block_dir(
     target: str | os.PathLike,
     blocks: Iterable[tuple[np.ndarray, np.ndarray, dict[str, Any]]],
@@ -106,8 +80,12 @@ def write_block_dir(
     """Writes blocks ``(points (N, 3) [m], centroid (3,) [m], extra index keys)`` in the given order as
     ``block_0000.pcd`` ... with their index; blocks are consumed one at a time."""
     target = Path(target)
+    if target.exists() and not overwrite:
+        raise UserError(f"output directory {target} exists; remove it or pass --overwrite")
+    if not target.absolute().parent.is_dir():
+        raise UserError(f"cannot write {target}: its parent directory does not exist; create it first")
     entries: list[BlockEntry] = []
-    with atomic_directory(target, overwrite) as tmp:
+    with atomic_directory(target) as tmp:
         for number, (points, centroid, extra) in enumerate(blocks):
             name = f"block_{number:04d}.pcd"
             record = _to_record(np.asarray(points, dtype=np.float64).reshape(-1, 3))

@@ -7,7 +7,7 @@ Points are numpy structured arrays whose field names and dtypes are those of the
 from grid_puzzle_localization.pcd.header import ENCODINGS, PcdHeader, read_pcd_header
 from grid_puzzle_localization.pcd.merge import merge_pcds
 from grid_puzzle_localization.pcd.reader import PcdChunks, PcdCloud, iter_pcd_chunks, read_pcd, xyz_array
-from grid_puzzle_localization.pcd.writer import PcdStreamWriter, atomic_file, write_pcd
+from grid_puzzle_localization.pcd.writer import PcdStreamWriter, write_pcd
 
 __all__ = [
     "ENCODINGS",
@@ -15,7 +15,6 @@ __all__ = [
     "PcdCloud",
     "PcdHeader",
     "PcdStreamWriter",
-    "atomic_file",
     "iter_pcd_chunks",
     "merge_pcds",
     "read_pcd",

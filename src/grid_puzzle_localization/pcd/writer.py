@@ -9,43 +9,19 @@ from __future__ import annotations
 import contextlib
 import os
 import struct
-import tempfile
-from collections.abc import Iterator
 from pathlib import Path
 from typing import BinaryIO
 
 import lzf
 import numpy as np
 
+from grid_puzzle_localization.atomic import atomic_write
 from grid_puzzle_localization.errors import PcdError
 from grid_puzzle_localization.pcd.ascii_codec import encode_ascii
 from grid_puzzle_localization.pcd.header import IDENTITY_VIEWPOINT, PcdHeader, header_for
 
 _ASCII_BATCH = 200_000
 _MAX_POINTS = 10**18  # reserves header room for a point count of up to 19 digits
-
-
-@contextlib.contextmanager
-def atomic_file(path: str | os.PathLike) -> Iterator[BinaryIO]:
-    """Binary file handle on a temporary beside ``path``; renamed onto ``path`` when the block exits
-    normally, removed when it raises."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        os.fchmod(fd, 0o666 & ~_umask())  # mkstemp makes it private; give it a normal file's mode
-        with os.fdopen(fd, "wb") as f:
-            yield f
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-        raise
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 def packed(points: np.ndarray, header: PcdHeader) -> np.ndarray:
@@ -69,7 +45,7 @@ def write_pcd(
     points = np.asarray(points)
     header = header_for(points.dtype, len(points), encoding, path, viewpoint)
     records = packed(points, header)
-    with atomic_file(path) as f:
+    with atomic_write(path, "wb", fsync=False) as f:
         f.write(header.text().encode("ascii"))
         if encoding == "binary":
             records.tofile(f)
@@ -110,7 +86,7 @@ class PcdStreamWriter:
         self._file: BinaryIO | None = None
 
     def __enter__(self) -> PcdStreamWriter:
-        self._context = atomic_file(self.path)
+        self._context = atomic_write(self.path, "wb", fsync=False)
         self._file = self._context.__enter__()
         self._file.write(self.header.text(self._reserved).encode("ascii"))
         return self

@@ -10,10 +10,8 @@ at ``start_time`` (seconds since the epoch).
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
-import shutil
 import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
@@ -24,6 +22,7 @@ import yaml
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
+from grid_puzzle_localization.atomic import atomic_directory
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.pcd import PcdStreamWriter
 from grid_puzzle_localization.sim.imu import ImuNoise, simulate_imu, true_motion
@@ -213,38 +212,22 @@ def generate(
     mapping = mapping_trajectory(world, loc, _rng(cfg.seed, 2))
     movers = make_movers(world, cfg.scale, loc.duration, cfg.movers, _rng(cfg.seed, 7))
     mount = Mount(np.array(MOUNTS[cfg.world]), np.eye(3))
-    tmp = out.parent / f".{out.name}.partial-{os.getpid()}"
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir()
-    try:
-        with RayCaster(world.mesh, cfg.threads) as caster:
-            sim = SweepSimulator(world.mesh, caster, get_sensor(cfg.sensor), mount)
-            (tmp / "scenario.yaml").write_text(
-                yaml.safe_dump(_describe(cfg, world, loc, mapping, mount, movers), sort_keys=False)
-            )
-            _write_tum(tmp / "ground_truth.tum", cfg.start_time, loc)
-            start = time.perf_counter()
-            sweeps, rays, points = _write_bag(tmp / "scenario.bag", cfg, sim, loc, mount, movers, progress)
-            mid = time.perf_counter()
-            map_sweeps, map_rays, map_in, map_points = _write_map(
-                tmp / "global_map.pcd", cfg, sim, mapping, mount, progress
-            )
-            end = time.perf_counter()
-        for name in FILES:
-            os.chmod(tmp / name, 0o644)  # temporary files are created private
+    with atomic_directory(out) as tmp, RayCaster(world.mesh, cfg.threads) as caster:
+        sim = SweepSimulator(world.mesh, caster, get_sensor(cfg.sensor), mount)
+        (tmp / "scenario.yaml").write_text(
+            yaml.safe_dump(_describe(cfg, world, loc, mapping, mount, movers), sort_keys=False)
+        )
+        _write_tum(tmp / "ground_truth.tum", cfg.start_time, loc)
+        start = time.perf_counter()
+        sweeps, rays, points = _write_bag(tmp / "scenario.bag", cfg, sim, loc, mount, movers, progress)
+        mid = time.perf_counter()
+        map_sweeps, map_rays, map_in, map_points = _write_map(
+            tmp / "global_map.pcd", cfg, sim, mapping, mount, progress
+        )
+        end = time.perf_counter()
+        for name in FILES:  # on disk before the directory is published
             with open(tmp / name, "rb") as f:
                 os.fsync(f.fileno())
-        if out.exists():
-            trash = out.parent / f".{out.name}.old-{os.getpid()}"
-            os.rename(out, trash)
-            os.rename(tmp, out)
-            shutil.rmtree(trash)
-        else:
-            os.rename(tmp, out)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            shutil.rmtree(tmp)
-        raise
     return Summary(
         out, loc.duration, sweeps, rays, points, map_sweeps, map_rays, map_in, map_points, mid - start, end - mid
     )

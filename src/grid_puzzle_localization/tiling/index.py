@@ -36,8 +36,8 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from grid_puzzle_localization.atomic import atomic_write
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.pcd import atomic_file
 
 INDEX_FILE = "index.json"
 AUTOWARE_METADATA_FILE = "pointcloud_map_metadata.yaml"
@@ -104,7 +104,7 @@ class TileIndex:
 
 
 def write_index(directory: Path, index: TileIndex) -> None:
-    with atomic_file(directory / INDEX_FILE) as f:
+    with atomic_write(directory / INDEX_FILE, "wb", fsync=False) as f:
         f.write(json.dumps(index.to_json(), separators=(",", ":")).encode())
 
 
@@ -112,7 +112,7 @@ def write_autoware_metadata(directory: Path, index: TileIndex) -> None:
     s = index.grid_size
     lines = [f"x_resolution: {s!r}", f"y_resolution: {s!r}"]
     lines += [f'"{t.file}": [{t.key[0] * s!r}, {t.key[1] * s!r}]' for t in index.tiles]
-    with atomic_file(directory / AUTOWARE_METADATA_FILE) as f:
+    with atomic_write(directory / AUTOWARE_METADATA_FILE, "wb", fsync=False) as f:
         f.write(("\n".join(lines) + "\n").encode())
 
 

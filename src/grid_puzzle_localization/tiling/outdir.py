@@ -7,11 +7,7 @@ unless ``force`` is set, in which case it is replaced (moved aside, then deleted
 
 from __future__ import annotations
 
-import contextlib
-import os
-import shutil
-import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 from grid_puzzle_localization.errors import UserError
@@ -29,23 +25,3 @@ def check_output_dir(out_dir: Path, force: bool, inputs: Sequence[Path] = ()) ->
             raise UserError(f"{path}: input lies inside the output directory {out_dir}, which would be replaced")
     if not out_dir.resolve().parent.is_dir():
         raise UserError(f"{out_dir}: parent directory does not exist; create it first")
-
-
-@contextlib.contextmanager
-def atomic_directory(out_dir: Path) -> Iterator[Path]:
-    """Yields a temporary directory beside ``out_dir``; renames it onto ``out_dir`` on success."""
-    parent = out_dir.resolve().parent
-    tmp = Path(tempfile.mkdtemp(dir=parent, prefix=f".{out_dir.name}.tmp-"))
-    try:
-        yield tmp
-        os.chmod(tmp, 0o755)  # mkdtemp makes it private
-        if out_dir.exists():
-            old = Path(tempfile.mkdtemp(dir=parent, prefix=f".{out_dir.name}.old-"))
-            os.replace(out_dir, old)
-            os.replace(tmp, out_dir)
-            shutil.rmtree(old)
-        else:
-            os.replace(tmp, out_dir)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise

@@ -23,6 +23,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from grid_puzzle_localization.atomic import atomic_directory
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.grid import check_grid_size, tile_center, tile_filename
 from grid_puzzle_localization.pcd import PcdChunks, PcdHeader, iter_pcd_chunks, read_pcd_header
@@ -30,7 +31,7 @@ from grid_puzzle_localization.pcd.reader import check_xyz
 from grid_puzzle_localization.tiling.buffer import TileBuffer, TileData, write_all
 from grid_puzzle_localization.tiling.grouping import group_chunk
 from grid_puzzle_localization.tiling.index import TileEntry, TileIndex, write_autoware_metadata, write_index
-from grid_puzzle_localization.tiling.outdir import atomic_directory, check_output_dir
+from grid_puzzle_localization.tiling.outdir import check_output_dir
 from grid_puzzle_localization.tiling.parallel import in_background
 
 MIN_MEMORY_MB = 1.0
