@@ -11,29 +11,20 @@ import rosbag
 import rospy
 from geometry_msgs.msg import PoseStamped, TransformStamped
 from scipy.spatial.transform import Rotation
-from sensor_msgs.msg import PointCloud2, PointField
+from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 from tf2_msgs.msg import TFMessage
 
 from grid_puzzle_localization import synthetic_scene as ss
+from grid_puzzle_localization.ros.cloud_msg import array_to_cloud
 
-XYZ_FIELDS = [PointField(name, 4 * i, PointField.FLOAT32, 1) for i, name in enumerate("xyz")]
+XYZ_DTYPE = np.dtype([("x", np.float32), ("y", np.float32), ("z", np.float32)])
 
 
 def xyz_cloud(points: np.ndarray, header: Header) -> PointCloud2:
-    """A dense x y z float32 PointCloud2 straight from an ``(N, 3)`` array."""
-    data = np.ascontiguousarray(points, dtype=np.float32)
-    return PointCloud2(
-        header=header,
-        height=1,
-        width=data.shape[0],
-        fields=XYZ_FIELDS,
-        is_bigendian=False,
-        point_step=12,
-        row_step=12 * data.shape[0],
-        data=data.tobytes(),
-        is_dense=True,
-    )
+    """A dense x y z float32 PointCloud2 from an ``(N, 3)`` array."""
+    xyz = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
+    return array_to_cloud(xyz.view(XYZ_DTYPE).reshape(-1), header=header)
 
 
 def _pose_fields(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
