@@ -32,15 +32,17 @@ demo: build
 clean:
 	source $(ROOT)/tools/env.sh && rm -rf "$$GPL_WS" $(ROOT)/build $(ROOT)/test_results
 
-# ---- tiling benchmark (issue 2) ----
+# ---------------------------------------------------------------- tiler benchmark
 .PHONY: bench-tiling
 bench-tiling: build
 	@$(SETUP) python3 $(ROOT)/bench/bench_tiling.py
-# ---------------------------------------------------------------- tile provider benchmark (issue 5)
+
+# ---------------------------------------------------------------- tile provider benchmark
 .PHONY: bench-provider
 bench-provider: build
 	@$(SETUP) python3 $(ROOT)/bench/bench_provider.py
-# ---------------------------------------------------------------- NDT scan matcher (issue 3)
+
+# ---------------------------------------------------------------- NDT scan matcher
 .PHONY: bench-ndt tsan
 
 # Builds bench/bench_ndt.cpp in the catkin workspace and prints one JSON line per configuration.
@@ -57,7 +59,7 @@ tsan: setup
 	cmake --build $(ROOT)/build/build_tsan -j2
 	TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(ROOT)/build/build_tsan/test_ndt_concurrency_tsan
 
-# ---------------------------------------------------------------- NDT localizer (issue 4)
+# ---------------------------------------------------------------- NDT localizer
 .PHONY: bench-localizer tsan-localizer
 # Build output goes to build/bench_localizer_build.log so stdout holds only the JSON lines.
 bench-localizer: setup
@@ -71,15 +73,18 @@ tsan-localizer: setup
 	cmake -S $(ROOT)/test/tsan_localizer -B $(ROOT)/build/build_tsan_localizer -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
 	cmake --build $(ROOT)/build/build_tsan_localizer -j2
 	cd $(ROOT) && TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(ROOT)/build/build_tsan_localizer/tsan_localizer_tests
-# --- scenario simulator (gpm simulate) ---
+
+# ---------------------------------------------------------------- scenario simulator
 .PHONY: bench-sim
 bench-sim: build
 	@$(SETUP) python3 $(ROOT)/bench/bench_sim.py
-# ---------------------------------------------------------------- block maps (issue 8)
+
+# ---------------------------------------------------------------- block maps
 .PHONY: bench-blocks
 bench-blocks: build
 	@$(SETUP) python3 $(ROOT)/bench/bench_blocks.py --repeats 3
-# ---------------------------------------------------------------- monitor and experiment (issue 6)
+
+# ---------------------------------------------------------------- monitor and experiment
 .PHONY: bench-monitor experiment-paper
 
 bench-monitor: build
