@@ -222,8 +222,6 @@ std::vector<std::pair<VoxelKey, VoxelStats>> voxelStatistics(const PointCloud& p
 NdtTarget::NdtTarget(const VoxelMapParams& params) : params_(params) {
   const std::string problem = params.validate();
   if (!problem.empty()) throw std::invalid_argument("NdtTarget: " + problem);
-  // Slice off anything a derived config (NdtConfig) adds: the snapshot keeps only the map parameters.
-  params_ = VoxelMapParams(params);
   current_ = std::make_shared<const VoxelMap>(params_);
 }
 
@@ -239,12 +237,9 @@ void NdtTarget::publish(std::shared_ptr<const VoxelMap> next) {
 
 void NdtTarget::setTarget(const PointCloud& points) {
   contributions_.clear();
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    current_ = std::make_shared<const VoxelMap>(params_);
-  }
+  // Built on an empty base and published once: readers never see an empty map in between.
   const Delta delta = voxelStatistics(points, params_.resolution, params_.threads);
-  apply(delta, false);
+  apply(delta, false, std::make_shared<const VoxelMap>(params_));
 }
 
 void NdtTarget::addTarget(TargetId id, const PointCloud& points) {
@@ -252,14 +247,14 @@ void NdtTarget::addTarget(TargetId id, const PointCloud& points) {
     throw std::invalid_argument("NdtTarget::addTarget: id " + std::to_string(id) +
                                 " is already in the target; remove it before adding it again");
   Delta delta = voxelStatistics(points, params_.resolution, params_.threads);
-  apply(delta, false);
+  apply(delta, false, current_);
   contributions_.emplace(id, std::move(delta));
 }
 
 bool NdtTarget::removeTarget(TargetId id) {
   const auto it = contributions_.find(id);
   if (it == contributions_.end()) return false;
-  apply(it->second, true);
+  apply(it->second, true, current_);
   contributions_.erase(it);
   return true;
 }
@@ -274,9 +269,8 @@ std::vector<TargetId> NdtTarget::targetIds() const {
   return ids;
 }
 
-void NdtTarget::apply(const Delta& delta, bool subtract) {
-  const std::shared_ptr<const VoxelMap> base = current_;  // only this (writer) thread replaces current_
-  auto next = std::make_shared<VoxelMap>(*base);          // shares every shard
+void NdtTarget::apply(const Delta& delta, bool subtract, std::shared_ptr<const VoxelMap> base) {
+  auto next = std::make_shared<VoxelMap>(*base);  // shares every shard
   // delta is grouped by shard (voxelStatistics sorts it so): find each shard's range.
   std::vector<std::pair<std::size_t, std::size_t>> ranges;  // [begin, end) per touched shard
   for (std::size_t b = 0; b < delta.size();) {
