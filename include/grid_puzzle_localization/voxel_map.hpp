@@ -177,7 +177,9 @@ class NdtTarget {
   std::shared_ptr<const VoxelMap> snapshot() const;
 
  private:
-  void apply(const std::vector<std::pair<VoxelKey, VoxelStats>>& delta, bool subtract);
+  // Publishes `base` changed by `delta`. Only the writer replaces current_, so it may read it without the lock.
+  void apply(const std::vector<std::pair<VoxelKey, VoxelStats>>& delta, bool subtract,
+             std::shared_ptr<const VoxelMap> base);
   void publish(std::shared_ptr<const VoxelMap> next);
 
   VoxelMapParams params_;

@@ -13,6 +13,11 @@ namespace {
 
 using Delta = std::vector<std::pair<VoxelKey, VoxelStats>>;
 
+// Below these sizes a tile update runs on the calling thread: waking an OpenMP team costs more than the work (and
+// on a loaded machine waiting for a descheduled team thread costs milliseconds).
+constexpr std::size_t kMinParallelPoints = 20000;
+constexpr std::size_t kMinParallelShards = 64;
+
 std::size_t capacityFor(std::size_t n) {
   std::size_t cap = 4;
   while (cap < 2 * n) cap *= 2;
@@ -135,8 +140,8 @@ VoxelGaussian deriveGaussian(const VoxelKey& key, const VoxelStats& st, const Vo
 }
 
 std::vector<std::pair<VoxelKey, VoxelStats>> voxelStatistics(const PointCloud& points, double resolution, int threads) {
-  const int nt = resolveThreads(threads);
   const std::size_t n = points.size();
+  const int nt = n < kMinParallelPoints ? 1 : resolveThreads(threads);
   const double inv = 1.0 / resolution;
   std::vector<VoxelKey> keys(n);
   std::vector<std::uint32_t> shard(n);
@@ -217,8 +222,6 @@ std::vector<std::pair<VoxelKey, VoxelStats>> voxelStatistics(const PointCloud& p
 NdtTarget::NdtTarget(const VoxelMapParams& params) : params_(params) {
   const std::string problem = params.validate();
   if (!problem.empty()) throw std::invalid_argument("NdtTarget: " + problem);
-  // Slice off anything a derived config (NdtConfig) adds: the snapshot keeps only the map parameters.
-  params_ = VoxelMapParams(params);
   current_ = std::make_shared<const VoxelMap>(params_);
 }
 
@@ -234,12 +237,9 @@ void NdtTarget::publish(std::shared_ptr<const VoxelMap> next) {
 
 void NdtTarget::setTarget(const PointCloud& points) {
   contributions_.clear();
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    current_ = std::make_shared<const VoxelMap>(params_);
-  }
+  // Built on an empty base and published once: readers never see an empty map in between.
   const Delta delta = voxelStatistics(points, params_.resolution, params_.threads);
-  apply(delta, false);
+  apply(delta, false, std::make_shared<const VoxelMap>(params_));
 }
 
 void NdtTarget::addTarget(TargetId id, const PointCloud& points) {
@@ -247,14 +247,14 @@ void NdtTarget::addTarget(TargetId id, const PointCloud& points) {
     throw std::invalid_argument("NdtTarget::addTarget: id " + std::to_string(id) +
                                 " is already in the target; remove it before adding it again");
   Delta delta = voxelStatistics(points, params_.resolution, params_.threads);
-  apply(delta, false);
+  apply(delta, false, current_);
   contributions_.emplace(id, std::move(delta));
 }
 
 bool NdtTarget::removeTarget(TargetId id) {
   const auto it = contributions_.find(id);
   if (it == contributions_.end()) return false;
-  apply(it->second, true);
+  apply(it->second, true, current_);
   contributions_.erase(it);
   return true;
 }
@@ -269,9 +269,8 @@ std::vector<TargetId> NdtTarget::targetIds() const {
   return ids;
 }
 
-void NdtTarget::apply(const Delta& delta, bool subtract) {
-  const std::shared_ptr<const VoxelMap> base = current_;  // only this (writer) thread replaces current_
-  auto next = std::make_shared<VoxelMap>(*base);          // shares every shard
+void NdtTarget::apply(const Delta& delta, bool subtract, std::shared_ptr<const VoxelMap> base) {
+  auto next = std::make_shared<VoxelMap>(*base);  // shares every shard
   // delta is grouped by shard (voxelStatistics sorts it so): find each shard's range.
   std::vector<std::pair<std::size_t, std::size_t>> ranges;  // [begin, end) per touched shard
   for (std::size_t b = 0; b < delta.size();) {
@@ -282,7 +281,7 @@ void NdtTarget::apply(const Delta& delta, bool subtract) {
     b = e;
   }
   std::vector<std::int64_t> d_vox(ranges.size(), 0), d_gauss(ranges.size(), 0), d_pts(ranges.size(), 0);
-  const int nt = resolveThreads(params_.threads);
+  const int nt = ranges.size() < kMinParallelShards ? 1 : resolveThreads(params_.threads);
   bool missing = false;
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 4) reduction(|| : missing)
   for (std::size_t r = 0; r < ranges.size(); ++r) {

@@ -28,6 +28,7 @@ TEST(NdtConcurrency, BackgroundUpdatesNeverDisturbAForegroundAlign) {
   std::thread writer([&] {
     // Slide a window of three tiles back and forth: every voxel of the middle tiles changes over and over.
     for (int step = 0; !stop.load() && step < 200; ++step) {
+      if (step % 50 == 25) target.setTarget(tiles[step % 6]);  // a full rebuild must never publish an empty map
       const std::size_t out = step % 6, in = (step + 3) % 6;
       if (target.hasTarget(out)) target.removeTarget(out);
       if (!target.hasTarget(in)) target.addTarget(in, tiles[in]);
@@ -39,6 +40,7 @@ TEST(NdtConcurrency, BackgroundUpdatesNeverDisturbAForegroundAlign) {
   while (updates.load() < 20 || aligns < 20) {
     const std::shared_ptr<const gpl::VoxelMap> snap = target.snapshot();
     const std::size_t voxels = snap->voxelCount(), points = snap->pointCount();
+    EXPECT_GT(voxels, 0u);
     const gpl::NdtResult r = aligner.align(*snap, source, Eigen::Matrix4f::Identity());
     EXPECT_TRUE(r.transform.allFinite());
     // The snapshot did not change under the align, whatever the writer did meanwhile.
