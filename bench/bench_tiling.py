@@ -62,6 +62,7 @@ def main() -> int:
         seconds, rss, phases = [], [], []
         for _ in range(args.repeats):
             shutil.rmtree(out, ignore_errors=True)
+            os.sync()  # flush the previous run's deletions and writes so they do not count against this one
             command = [sys.executable, "-c", GPM, "tile", "--json", "--grid-size", f"{args.grid_size:g}"]
             wall, peak, summary = run_child(
                 [*command, "--memory-mb", f"{args.memory_mb:g}", str(campus), "-o", str(out)]
@@ -96,6 +97,7 @@ def main() -> int:
                     "cpu": cpu_model(),
                     "cores": os.cpu_count(),
                     "threads_used": 1,
+                    "processes_used": 2,  # gpm tile forks one child that creates the tile files
                     "load_avg_1min": round(os.getloadavg()[0], 2),
                     "output_fs": subprocess.run(
                         ["stat", "-f", "-c", "%T", tmp], capture_output=True, text=True

@@ -6,11 +6,12 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 out="$root/results/demo"
 scenario="$out/scenario"
-# Small: a 0.3-scale courtyard, 40 s of walking, the Livox-like sensor as in the paper.
-sim_args=(courtyard --scale 0.3 --duration 40 --seed 1)
+# The full-size courtyard world, 40 s of walking (the map covers the route), the Livox-like sensor as in the paper.
+sim_args=(courtyard --scale 1.0 --duration 40 --seed 1)
 stamp="$scenario/.demo-args"
 if [[ ! -f "$scenario/scenario.yaml" || "$(cat "$stamp" 2>/dev/null)" != "${sim_args[*]}" ]]; then
   echo "demo: simulating ${sim_args[*]} into $scenario"
+  mkdir -p "$out"
   python3 "$root/scripts/gpm" simulate "${sim_args[@]}" -o "$scenario" --overwrite --quiet
   echo "${sim_args[*]}" >"$stamp"
 else

@@ -132,6 +132,19 @@ def test_bag_input_builds_the_same_blocks(keyframe_set, tmp_path):
     np.testing.assert_allclose(b.params["extrinsic"], a.params["extrinsic"], atol=1e-12)  # read from /tf_static
 
 
+def test_map_input_cuts_the_same_keyframes(keyframe_set, tmp_path):
+    scans, poses = keyframe_set
+    cloud = np.empty(len(world()), dtype=XYZ32)
+    cloud["x"], cloud["y"], cloud["z"] = world().T
+    write_pcd(tmp_path / "world.pcd", cloud)
+    assert run_blocks(scans, poses, tmp_path / "from_pcd") == 0
+    map_args = ["blocks", str(tmp_path / "from_map"), "--map", str(tmp_path / "world.pcd"), "--trajectory", str(poses)]
+    assert main([*map_args, "--scan-radius", str(RADIUS), *BUILD]) == 0
+    a, b = read_block_index(tmp_path / "from_pcd"), read_block_index(tmp_path / "from_map")
+    assert [e.points for e in a.blocks] == [e.points for e in b.blocks]
+    np.testing.assert_allclose(a.centroids(), b.centroids(), atol=1e-6)
+
+
 def test_existing_output_needs_overwrite(keyframe_set, tmp_path, capsys):
     scans, poses = keyframe_set
     out = tmp_path / "blocks"

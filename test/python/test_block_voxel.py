@@ -25,8 +25,9 @@ def test_voxel_means_match_brute_force(spread):
     np.testing.assert_allclose(out, brute_force(points, 0.5), rtol=1e-12, atol=1e-12)
 
 
-def test_filtering_twice_changes_nothing_and_zero_voxel_is_identity():
+def test_filtering_twice_changes_nothing_and_zero_voxel_removes_only_duplicates():
     points = np.random.default_rng(4).uniform(-20.0, 20.0, size=(5000, 3))
     once = voxel_downsample(points, 0.7)
     np.testing.assert_allclose(voxel_downsample(once, 0.7), once, rtol=0, atol=1e-12)
-    np.testing.assert_array_equal(voxel_downsample(points, 0.0), points)
+    doubled = np.concatenate([points, points[:100]])
+    np.testing.assert_array_equal(voxel_downsample(doubled, 0.0), np.unique(points, axis=0))

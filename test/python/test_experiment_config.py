@@ -14,7 +14,7 @@ def scenario_dir(tmp_path, bags=("scenario.bag",), gt=True):
     (tmp_path / "global_map.pcd").write_bytes(b"")
     if gt:
         (tmp_path / "ground_truth.tum").write_text("1.0 0 0 0 0 0 0 1\n")
-    (tmp_path / "scenario.yaml").write_text("world: courtyard\nseed: 3\n")
+    (tmp_path / "scenario.yaml").write_text("parameters:\n  world: courtyard\n  seed: 3\n")
     return tmp_path
 
 
@@ -56,13 +56,20 @@ def test_presets_and_overrides(tmp_path):
             "bag /nonexistent.bag does not exist",
         ),
         (["SCN", "-o", "out", "--rate", "0"], "--rate must be > 0"),
-        (["SCN", "-o", "out", "--modes", "block_map"], "needs --blocks"),
+        (["SCN", "-o", "out", "--modes", "block_map", "--block-size", "0"], "--block-size must be > 0"),
     ],
 )
 def test_bad_input_is_a_user_error(tmp_path, capsys, argv, message):
     d = scenario_dir(tmp_path)
     assert main(["experiment", *[str(d) if a == "SCN" else a for a in argv]]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_block_map_without_blocks_needs_ground_truth(tmp_path, capsys):
+    d = scenario_dir(tmp_path, gt=False)
+    argv = ["experiment", str(d), "-o", str(tmp_path / "out"), "--modes", "block_map", "--initial-pose", *"000000"]
+    assert main(argv) == 2
+    assert "needs --blocks" in capsys.readouterr().err
 
 
 def test_without_ground_truth_an_initial_pose_is_needed(tmp_path, capsys):

@@ -6,11 +6,11 @@ import json
 from pathlib import Path
 
 import numpy as np
-import psutil
 import pytest
 import rosbag
 import rospy
 from nav_msgs.msg import Odometry
+from process_check import processes_on
 from sensor_msgs import point_cloud2
 from sensor_msgs.msg import PointField
 from std_msgs.msg import Header
@@ -49,18 +49,6 @@ def write_scenario(d, seconds: float = 4.0):
     points["x"] = np.linspace(-10, 10, 1000)
     write_pcd(d / "global_map.pcd", points)
     return gt
-
-
-def processes_on(master_uri: str) -> list[int]:
-    """PIDs of processes whose environment points at ``master_uri``."""
-    pids = []
-    for p in psutil.process_iter():
-        try:
-            if p.environ().get("ROS_MASTER_URI") == master_uri:
-                pids.append(p.pid)
-        except (psutil.NoSuchProcess, psutil.AccessDenied, psutil.ZombieProcess):
-            pass
-    return pids
 
 
 @pytest.fixture(scope="module")

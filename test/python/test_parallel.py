@@ -1,32 +1,38 @@
-"""The forked tile-writer split: every item handled exactly once, failures surface."""
+"""The forked background job: it runs exactly once, beside the caller, and its failure surfaces."""
 
 import os
 
 import pytest
 
-from grid_puzzle_localization.tiling.parallel import MIN_ITEMS_TO_FORK, run_split
+from grid_puzzle_localization.tiling.parallel import in_background
 
 
-@pytest.mark.parametrize("n", [0, 5, MIN_ITEMS_TO_FORK, MIN_ITEMS_TO_FORK + 1])
-def test_every_item_once_across_processes(tmp_path, n):
-    def work(share: range) -> None:
-        for k in share:  # O_EXCL: a second writer of the same item would fail
-            os.close(os.open(tmp_path / f"{k}.{os.getpid()}", os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+@pytest.mark.parametrize("fork", [True, False])
+def test_job_runs_once_beside_the_caller(tmp_path, fork):
+    def job() -> None:
+        (tmp_path / f"job.{os.getpid()}").write_text("done")
 
-    run_split(n, work, processes=2)
-    names = [p.name.split(".") for p in tmp_path.iterdir()]
-    assert sorted(int(k) for k, _ in names) == list(range(n))
-    assert len({pid for _, pid in names}) == (2 if n >= MIN_ITEMS_TO_FORK else min(n, 1))
+    with in_background(job, fork):
+        (tmp_path / f"caller.{os.getpid()}").write_text("done")
+    names = sorted(p.name.split(".")[0] for p in tmp_path.iterdir())
+    pids = {p.name.split(".")[1] for p in tmp_path.iterdir()}
+    assert names == ["caller", "job"]
+    assert len(pids) == (2 if fork else 1)
 
 
-def test_child_failure_raises_after_parent_work(tmp_path):
-    done = []
+def test_failed_child_raises_after_the_block(tmp_path):
+    def job() -> None:
+        raise RuntimeError("disk full")
 
-    def work(share: range) -> None:
-        if share.start == 1:
-            raise RuntimeError("disk full")
-        done.append(len(share))
+    with pytest.raises(OSError, match="tile writer process failed"), in_background(job, fork=True):
+        (tmp_path / "caller").write_text("done")
+    assert (tmp_path / "caller").exists()
 
-    with pytest.raises(OSError, match="1 tile writer process"):
-        run_split(MIN_ITEMS_TO_FORK, work, processes=2)
-    assert done == [MIN_ITEMS_TO_FORK // 2]
+
+def test_caller_failure_still_waits_for_the_child(tmp_path):
+    def job() -> None:
+        (tmp_path / "job").write_text("done")
+
+    with pytest.raises(ValueError), in_background(job, fork=True):
+        raise ValueError("index failed")
+    assert (tmp_path / "job").read_text() == "done"  # the child had finished before the error surfaced

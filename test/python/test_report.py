@@ -2,6 +2,8 @@
 every file it writes parses."""
 
 import json
+import os
+import stat
 
 import numpy as np
 import pytest
@@ -118,7 +120,7 @@ def test_report_markdown_and_plots_parse(experiment):
     assert "| Memory change | -140.0 MiB (-46.7 %) | -55.0 MB (-33.1 %) | -316.3 MB (-62.1 %) |" in report
     assert "| Trajectory RMSE, grid puzzle vs global [m] | 0.0300 | 0.0433 | 0.0677 |" in report
     assert "| Tile files | 250 | 8,282 | 47,480 |" in report
-    assert "| tiles | 250 | 1,075,000 | 1,000,000 | 75,000 | 25,000 |" in report
+    assert "| grid puzzle tiles | 250 | 1,075,000 | 1,000,000 | 75,000 | 25,000 | – | – |" in report
     for name in ("cpu", "memory", "trajectories", "errors"):
         assert f"(plots/{name}.png)" in report
         image = imread(experiment / "plots" / f"{name}.png")
@@ -136,3 +138,12 @@ def test_gpm_report_prints_the_table(experiment, capsys):
 def test_report_of_a_directory_without_run_json_is_a_user_error(tmp_path, capsys):
     assert main(["report", str(tmp_path)]) == 2
     assert "run.json" in capsys.readouterr().err
+
+
+def test_written_files_get_the_umask_mode(experiment):
+    # Not the owner-only mode of the temporary file they were written to.
+    umask = os.umask(0)
+    os.umask(umask)
+    build_report(experiment)
+    for path in [experiment / "summary.json", experiment / "report.md", experiment / "plots" / "cpu.png"]:
+        assert stat.S_IMODE(path.stat().st_mode) == 0o666 & ~umask, path

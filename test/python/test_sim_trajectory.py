@@ -104,3 +104,16 @@ def test_stationary_imu_reads_gravity_only():
     np.testing.assert_allclose(gyro, 0.0, atol=1e-12)
     np.testing.assert_allclose(accel, np.tile([0.0, 0.0, GRAVITY], (401, 1)), atol=1e-9)
     np.testing.assert_allclose(velocity, 0.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["courtyard", "urban"])
+def test_worlds_and_routes_build_for_many_seeds_and_scales(name):
+    for seed in range(4):
+        for scale in (0.2, 0.25, 0.3, 0.37, 0.6, 1.0):
+            world = worlds.make_world(name, seed, scale)
+            x0, y0, x1, y1 = world.extent
+            assert len(world.mesh.faces) > 500
+            assert np.all((world.graph.nodes >= [x0, y0]) & (world.graph.nodes <= [x1, y1]))
+            if scale <= 0.3:
+                traj = localization_trajectory(world, scale, _rng(seed, 1))
+                assert traj.length() == pytest.approx(PROFILES[name].length * scale, rel=0.02)

@@ -200,6 +200,24 @@ def test_index_gives_the_same_tiles_as_the_tiler_loader_and_the_listing(tiled_by
         open_tile_directory(tiled_by_tiler, 2.0)
 
 
+@pytest.mark.parametrize("chunk_bytes", [7, 64, 301, 4096, 1 << 20])
+def test_streamed_index_keys_match_the_tiler_loader_across_chunk_boundaries(tiled_by_tiler, chunk_bytes):
+    from grid_puzzle_localization.tile_directory import read_index_keys
+    from grid_puzzle_localization.tiling import load_tile_index
+
+    s, keys = read_index_keys(tiled_by_tiler / "index.json", chunk_bytes)
+    reference = load_tile_index(tiled_by_tiler)
+    assert s == reference.grid_size
+    assert keys.tolist() == sorted(list(t.key) for t in reference.tiles)
+
+
+def test_index_of_another_format_is_refused(tmp_path):
+    write_tiles(tmp_path, [(0, 0)], S, count=2)
+    (tmp_path / "index.json").write_text('{"format": "other", "version": 1, "grid_size": 2.0, "tiles": []}')
+    with pytest.raises(UserError, match="not a version 1 grid_puzzle_tiles index"):
+        open_tile_directory(tmp_path)
+
+
 def test_store_serves_tiler_output(tiled_by_tiler):
     store = TileStore(open_tile_directory(tiled_by_tiler), prefetch=False)
     try:

@@ -7,6 +7,7 @@ import argparse
 import sys
 
 from grid_puzzle_localization.blocks.builder import BlockConfig, build_blocks, union_points
+from grid_puzzle_localization.blocks.map_scans import DEFAULT_SCAN_RADIUS
 from grid_puzzle_localization.blocks.poses import parse_extrinsic, read_tum
 from grid_puzzle_localization.blocks.store import write_block_dir
 from grid_puzzle_localization.errors import UserError
@@ -17,12 +18,23 @@ KIND = "keyframe_blocks"
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     defaults = BlockConfig()
     parser.add_argument("output", help="block directory to write (numbered PCDs, centroids.txt, index.yaml)")
-    source = parser.add_argument_group("input (a bag with --trajectory, or --keyframes with --poses)")
+    source = parser.add_argument_group(
+        "input (a bag with --trajectory, --keyframes with --poses, or --map with --trajectory)"
+    )
     source.add_argument("--bag", help="ROS bag holding the scans (sensor_msgs/PointCloud2)")
     source.add_argument("--topic", default="points", help="cloud topic in the bag (default: %(default)s)")
     source.add_argument("--trajectory", help="TUM file of the robot pose T_map_robot, interpolated to scan stamps")
     source.add_argument("--keyframes", help="directory of keyframe PCDs (sensor frame), taken in file-name order")
     source.add_argument("--poses", help="TUM file with one robot pose per keyframe PCD, in the same order")
+    source.add_argument(
+        "--map", help="prior map PCD: keyframes are its points within --scan-radius of the --trajectory poses"
+    )
+    source.add_argument(
+        "--scan-radius",
+        type=float,
+        default=DEFAULT_SCAN_RADIUS,
+        help="pseudo-scan range for --map [m] (default: %(default)s)",
+    )
     parser.add_argument(
         "--extrinsic",
         nargs=7,
@@ -49,8 +61,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _scans(args: argparse.Namespace):
     """(scans, extrinsic, source description, bag scans or None) from the arguments."""
-    if args.bag and args.keyframes:
-        raise UserError("give either --bag (with --trajectory) or --keyframes (with --poses), not both")
+    if sum(1 for given in (args.bag, args.keyframes, args.map) if given) > 1:
+        raise UserError("give one input: --bag (with --trajectory), --keyframes (with --poses) or --map")
     if args.bag:
         if not args.trajectory:
             raise UserError("--bag needs --trajectory, a TUM file of the robot poses")
@@ -68,7 +80,21 @@ def _scans(args: argparse.Namespace):
 
         scans = pcd_keyframe_scans(args.keyframes, args.poses)
         return scans, parse_extrinsic(args.extrinsic), {"keyframes": str(args.keyframes), "poses": str(args.poses)}
-    raise UserError("no input: give --bag BAG --trajectory TUM, or --keyframes DIR --poses TUM")
+    if args.map:
+        if not args.trajectory:
+            raise UserError("--map needs --trajectory, a TUM file of the poses to cut pseudo-scans at")
+        if not args.scan_radius > 0.0:
+            raise UserError(f"--scan-radius must be > 0 m (got {args.scan_radius})")
+        from grid_puzzle_localization.blocks.map_scans import map_scans
+        from grid_puzzle_localization.pcd import read_pcd, xyz_array
+
+        points = xyz_array(read_pcd(args.map).points)
+        scans = map_scans(points, read_tum(args.trajectory), args.scan_radius)
+        source = {"map": str(args.map), "trajectory": str(args.trajectory), "scan_radius": args.scan_radius}
+        return scans, parse_extrinsic(None), source
+    raise UserError(
+        "no input: give --bag BAG --trajectory TUM, --keyframes DIR --poses TUM, or --map PCD --trajectory TUM"
+    )
 
 
 def run(args: argparse.Namespace) -> int:

@@ -30,7 +30,7 @@ from grid_puzzle_localization.errors import UserError
 class BlockConfig:
     block_size: float = 50.0  # S [m]: a candidate spans keyframes within S of its first keyframe
     keyframe_spacing: float = 1.0  # [m] travelled between keyframes; 0 keeps every scan
-    voxel: float = 0.2  # downsample voxel edge [m]; 0 disables
+    voxel: float = 0.2  # downsample voxel edge [m]; 0: no voxel filter, exact duplicates kept once
 
     def checked(self) -> BlockConfig:
         if not (math.isfinite(self.block_size) and self.block_size > 0.0):
@@ -116,9 +116,7 @@ def union_points(blocks: list[Block], voxel: float) -> int:
     ``voxel == 0``). Stored points over this is the blocks' overlap factor."""
     if not blocks:
         return 0
-    union = np.concatenate([b.points for b in blocks])
-    keys = np.floor(union / voxel).astype(np.int64) if voxel > 0.0 else union
-    return len(np.unique(keys, axis=0))
+    return len(voxel_downsample(np.concatenate([b.points for b in blocks]), voxel))
 
 
 def build_blocks(

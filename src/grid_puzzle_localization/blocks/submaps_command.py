@@ -5,8 +5,10 @@ from __future__ import annotations
 import argparse
 import sys
 
+import numpy as np
+
 from grid_puzzle_localization.blocks.fixed_cut import SubmapConfig, cut_submaps
-from grid_puzzle_localization.blocks.store import write_block_dir
+from grid_puzzle_localization.blocks.store import BlockIndex, write_block_dir
 from grid_puzzle_localization.pcd import read_pcd, xyz_array
 
 KIND = "fixed_submaps"
@@ -26,21 +28,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--overwrite", action="store_true", help="replace the output directory if it exists")
 
 
-def run(args: argparse.Namespace) -> int:
-    config = SubmapConfig(args.side, args.overlap).checked()
-    points = xyz_array(read_pcd(args.map).points)
+def write_submaps(points: np.ndarray, config: SubmapConfig, output, map_path, overwrite: bool) -> BlockIndex:
+    """Cuts ``points`` (the map at ``map_path``) into submaps and writes them as a block directory."""
     stride = config.stride
-    index = write_block_dir(
-        args.output,
+    return write_block_dir(
+        output,
         (
             (cloud, cloud.mean(axis=0), {"cell": [i, j], "origin": [i * stride, j * stride], "side": config.side})
             for (i, j), cloud in cut_submaps(points, config)
         ),
         KIND,
-        {"side": config.side, "overlap": config.overlap, "stride": stride, "map": str(args.map)},
+        {"side": config.side, "overlap": config.overlap, "stride": stride, "map": str(map_path)},
         len(points),
-        overwrite=args.overwrite,
+        overwrite=overwrite,
     )
+
+
+def run(args: argparse.Namespace) -> int:
+    config = SubmapConfig(args.side, args.overlap).checked()
+    points = xyz_array(read_pcd(args.map).points)
+    index = write_submaps(points, config, args.output, args.map, args.overwrite)
     stored = sum(b.points for b in index.blocks)
     total = sum(b.bytes for b in index.blocks)
     files = len(index.blocks)

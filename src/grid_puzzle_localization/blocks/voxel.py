@@ -16,16 +16,21 @@ def check_voxel(voxel: float) -> float:
     """Returns the voxel edge [m] as a float (0 disables the filter); raises UserError when negative."""
     voxel = float(voxel)
     if not (np.isfinite(voxel) and voxel >= 0.0):
-        raise UserError(f"voxel size must be >= 0 metres (got {voxel}); for example --voxel 0.2, or 0 for none")
+        raise UserError(
+            f"voxel size must be >= 0 metres (got {voxel}); e.g. --voxel 0.2, or 0 for distinct points only"
+        )
     return voxel
 
 
 def voxel_downsample(points: np.ndarray, voxel: float) -> np.ndarray:
     """Means of ``points`` ``(N, 3)`` [m] per voxel of edge ``voxel`` [m], as ``(M, 3)`` float64, in
-    ascending voxel order. ``voxel == 0`` returns the points unchanged (as float64)."""
+    ascending voxel order. ``voxel == 0`` only keeps each distinct point once (sorted), so overlapping
+    scans cut from one map do not pile up copies."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    if voxel == 0.0 or len(points) == 0:
+    if len(points) == 0:
         return points
+    if voxel == 0.0:
+        return np.unique(points, axis=0)
     keys = np.floor(points / voxel).astype(np.int64)
     linear = _linear(keys)
     _, inverse, counts = np.unique(

@@ -5,12 +5,13 @@ per mode, and prints the comparison table."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation.storage import storage_figures
 from grid_puzzle_localization.experiment.config import MODES, PRESETS, ExperimentConfig, NodeRoles, WindowPreset
-from grid_puzzle_localization.experiment.maps import ensure_tiles
+from grid_puzzle_localization.experiment.maps import ensure_blocks, ensure_submaps, ensure_tiles
 from grid_puzzle_localization.experiment.runner import run_experiment
 from grid_puzzle_localization.experiment.scenario import read_scenario
 from grid_puzzle_localization.report.markdown import comparison_table
@@ -23,7 +24,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--map", help="global map PCD (overrides the scenario's)")
     parser.add_argument("--ground-truth", help="ground truth TUM file (optional)")
     parser.add_argument("--tiles", help="tile directory: reused if it holds the map tiles, else cut (OUT/tiles_s<S>)")
-    parser.add_argument("--blocks", help="block map directory from `gpm blocks` (block_map mode)")
+    parser.add_argument(
+        "--blocks", help="block map directory from `gpm blocks` (default: stitched from the map along the ground truth)"
+    )
+    parser.add_argument(
+        "--block-size", type=float, default=ExperimentConfig.block_size_m, help="block size S [m] of built block maps"
+    )
     parser.add_argument("--modes", nargs="+", default=["global", "grid_puzzle"], choices=MODES, help="modes to run")
     parser.add_argument(
         "--preset", default="demo", choices=sorted(PRESETS), help="window preset n, k, s (default demo)"
@@ -65,6 +71,7 @@ def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
         ground_truth=Path(gt) if gt else None,
         tiles=Path(args.tiles) if args.tiles else None,
         blocks=Path(args.blocks) if args.blocks else None,
+        block_size_m=args.block_size,
         modes=list(dict.fromkeys(args.modes)),
         preset=args.preset,
         window=window,
@@ -84,7 +91,13 @@ def run(args: argparse.Namespace) -> int:
     cfg.check()
     tile_dir = cfg.tiles or cfg.out_dir / f"tiles_s{cfg.window.grid_size_m:g}"
     tiles = ensure_tiles(cfg.global_map, tile_dir, cfg.window.grid_size_m)
-    summary = run_experiment(cfg, tiles, storage_figures(cfg.global_map, tiles))
+    blocks = submaps = None
+    if "block_map" in cfg.modes:
+        size = cfg.block_size_m
+        blocks = cfg.blocks or ensure_blocks(cfg.global_map, cfg.ground_truth, cfg.out_dir / f"blocks_S{size:g}", size)
+        submaps = ensure_submaps(cfg.global_map, cfg.out_dir / f"submaps_L{size:g}", size)
+        cfg = dataclasses.replace(cfg, blocks=blocks)
+    summary = run_experiment(cfg, tiles, storage_figures(cfg.global_map, tiles, blocks, submaps))
     print("\n".join(comparison_table(summary)))
     print(f"\nreport: {cfg.out_dir / 'report.md'}, plots: {cfg.out_dir / 'plots'}/")
     return 0

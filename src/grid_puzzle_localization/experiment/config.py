@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from grid_puzzle_localization.blocks.builder import BlockConfig
 from grid_puzzle_localization.errors import UserError
 
 MODES = ("global", "grid_puzzle", "block_map")
@@ -44,7 +45,8 @@ class ExperimentConfig:
     global_map: Path
     ground_truth: Path | None = None
     tiles: Path | None = None  # None: cut from global_map into out_dir/tiles
-    blocks: Path | None = None  # block map directory from `gpm blocks` (block_map mode)
+    blocks: Path | None = None  # block map directory from `gpm blocks`; None: built from global_map along ground_truth
+    block_size_m: float = BlockConfig.block_size  # S of the blocks built when blocks is None
     modes: list[str] = field(default_factory=lambda: ["global", "grid_puzzle"])
     preset: str = "demo"
     window: WindowPreset = PRESETS["demo"]
@@ -73,8 +75,12 @@ class ExperimentConfig:
         for label, path in (("bag", self.bag), ("global map", self.global_map), ("ground truth", self.ground_truth)):
             if path is not None and not Path(path).is_file():
                 raise UserError(f"{label} {path} does not exist")
-        if "block_map" in self.modes and self.blocks is None:
-            raise UserError("block_map mode needs --blocks DIR (block maps from `gpm blocks`)")
+        if "block_map" in self.modes and self.blocks is None and self.ground_truth is None:
+            raise UserError(
+                "block_map mode needs --blocks DIR (from `gpm blocks`), or ground truth to build them from the map"
+            )
+        if not self.block_size_m > 0:
+            raise UserError(f"--block-size must be > 0 m (got {self.block_size_m})")
         if self.initial_pose is None and self.ground_truth is None:
             raise UserError("without ground truth, give the start pose: --initial-pose X Y Z ROLL PITCH YAW")
         if self.initial_pose is not None and len(self.initial_pose) != 6:

@@ -27,6 +27,70 @@ def ensure_tiles(global_map: str | os.PathLike, tile_dir: str | os.PathLike, gri
         if newest_tile < Path(global_map).stat().st_mtime:
             raise UserError(f"{tile_dir} is older than {global_map}: remove it so the tiles are cut again")
         return tile_dir
+    tile_dir.parent.mkdir(parents=True, exist_ok=True)
     print(f"gpm experiment: cutting {global_map} into {grid_size_m} m tiles in {tile_dir}")
     tile_map([global_map], tile_dir, TileConfig(grid_size=grid_size_m, progress=False, force=True))
     return tile_dir
+
+
+# Pseudo-scans carry each map point through the robot frame and back, so overlapping keyframes hold copies
+# of it that differ by float rounding; a voxel far finer than any prior map's density merges them into one.
+PSEUDO_SCAN_VOXEL = 0.005  # [m]
+SUBMAP_OVERLAP = 0.5  # overlap ratio of the fixed-size submaps in the storage comparison (grid puzzle paper, Fig. 1)
+
+
+def _fresh(directory: Path, inputs: list[Path], params: dict) -> bool:
+    """True when ``directory`` holds a block index built with ``params`` after every input changed."""
+    from grid_puzzle_localization.blocks.store import INDEX_FILE, read_block_index
+
+    if not (directory / INDEX_FILE).is_file():
+        return False
+    index = read_block_index(directory)
+    newer = (directory / INDEX_FILE).stat().st_mtime >= max(p.stat().st_mtime for p in inputs)
+    return newer and all(index.params.get(k) == v for k, v in params.items())
+
+
+def ensure_blocks(global_map: Path, ground_truth: Path, block_dir: Path, block_size_m: float) -> Path:
+    """Keyframe-stitched blocks (Algorithm 1) of pseudo-scans cut from ``global_map`` along the ground
+    truth, so block_map mode localizes against the same prior map as the other modes, at its own density
+    (PSEUDO_SCAN_VOXEL only merges copies of a point). Reused while their index matches."""
+    from grid_puzzle_localization.blocks.builder import BlockConfig, build_blocks, union_points
+    from grid_puzzle_localization.blocks.map_scans import DEFAULT_SCAN_RADIUS, map_scans
+    from grid_puzzle_localization.blocks.poses import read_tum
+    from grid_puzzle_localization.blocks.store import write_block_dir
+    from grid_puzzle_localization.pcd import read_pcd, xyz_array
+
+    config = BlockConfig(block_size=block_size_m, voxel=PSEUDO_SCAN_VOXEL).checked()
+    params = {
+        "block_size": config.block_size,
+        "keyframe_spacing": config.keyframe_spacing,
+        "voxel": config.voxel,
+        "scan_radius": DEFAULT_SCAN_RADIUS,
+        "map": str(global_map),
+        "trajectory": str(ground_truth),
+    }
+    if _fresh(block_dir, [global_map, ground_truth], params):
+        return block_dir
+    print(
+        f"gpm experiment: stitching {block_size_m:g} m block maps of {global_map} along {ground_truth} in {block_dir}"
+    )
+    points = xyz_array(read_pcd(global_map).points)
+    blocks, _ = build_blocks(map_scans(points, read_tum(ground_truth), DEFAULT_SCAN_RADIUS), config)
+    extras = ((b.points, b.centroid, {"keyframes": b.keyframes}) for b in blocks)
+    write_block_dir(block_dir, extras, "keyframe_blocks", params, union_points(blocks, config.voxel), overwrite=True)
+    return block_dir
+
+
+def ensure_submaps(global_map: Path, submap_dir: Path, side_m: float) -> Path:
+    """Fixed-size overlapping submaps (side ``side_m``, overlap SUBMAP_OVERLAP) of ``global_map``, for
+    the storage comparison. Reused while their index matches."""
+    from grid_puzzle_localization.blocks.fixed_cut import SubmapConfig
+    from grid_puzzle_localization.blocks.submaps_command import write_submaps
+    from grid_puzzle_localization.pcd import read_pcd, xyz_array
+
+    config = SubmapConfig(side_m, SUBMAP_OVERLAP).checked()
+    params = {"side": config.side, "overlap": config.overlap, "map": str(global_map)}
+    if _fresh(submap_dir, [global_map], params):
+        return submap_dir
+    write_submaps(xyz_array(read_pcd(global_map).points), config, submap_dir, global_map, overwrite=True)
+    return submap_dir

@@ -37,5 +37,6 @@ def read_scenario(directory: str | Path) -> ScenarioInputs:
             settings = yaml.safe_load((d / "scenario.yaml").read_text()) or {}
         except yaml.YAMLError as err:
             raise UserError(f"{d / 'scenario.yaml'} is not valid YAML ({err})") from err
-    name = str(settings.get("world", settings.get("scenario", settings.get("name", d.name))))
+    parameters = settings.get("parameters") or {}
+    name = str(parameters.get("world") or settings.get("world") or d.name)
     return ScenarioInputs(name, bags[0], global_map, gt if gt.is_file() else None, settings)

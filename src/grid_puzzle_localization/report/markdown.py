@@ -153,16 +153,30 @@ def storage_table(summary: Mapping) -> list[str]:
     if not storage:
         return ["No storage figures (no map or tiles were given)."]
     lines = [
-        "| map | files | bytes | point data bytes | header bytes | filesystem-block overhead bytes |",
-        "|---|---:|---:|---:|---:|---:|",
+        "| map | files | bytes | point data bytes | header bytes | filesystem-block overhead bytes "
+        "| overlap factor | mean bytes per file |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
-    for key in ("global_map", "tiles", "block_maps"):
+    labels = {
+        "global_map": "global map",
+        "tiles": "grid puzzle tiles",
+        "block_maps": "keyframe-stitched block maps",
+        "fixed_submaps": "fixed-size overlapping submaps",
+    }
+    for key, label in labels.items():
         s = storage.get(key)
         if s:
+            overlap = f"{s['overlap_factor']:.3f}" if "overlap_factor" in s else "–"
+            mean = f"{s['mean_bytes_per_file']:,.0f}" if "mean_bytes_per_file" in s else "–"
             lines.append(
-                f"| {key.replace('_', ' ')} | {s['files']:,} | {s['bytes']:,} | {s['data_bytes']:,} "
-                f"| {s['header_bytes']:,} | {s['disk_bytes'] - s['bytes']:,} |"
+                f"| {label} | {s['files']:,} | {s['bytes']:,} | {s['data_bytes']:,} "
+                f"| {s['header_bytes']:,} | {s['disk_bytes'] - s['bytes']:,} | {overlap} | {mean} |"
             )
+    lines += [
+        "",
+        "Overlap factor: stored points / map points (the map the files represent; for the block maps, the",
+        "union of the blocks). 1 means no point is stored twice.",
+    ]
     return lines
 
 

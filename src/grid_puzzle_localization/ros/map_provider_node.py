@@ -1,9 +1,10 @@
 """grid_puzzle_map_provider: serves the tiles of the grid puzzle window around the robot.
 
-Subscribes to ``odom`` (nav_msgs/Odometry) or ``pose`` (PoseWithCovarianceStamped), both in the map
-frame. Callbacks only store the latest pose; a worker thread recomputes the window (window.py), updates
-the tile store (tile_store.py) and publishes ``tile_delta`` (TileDelta), the latched ``map_cloud`` and
-the latched ``~status``. Delta protocol: every broadcast delta increments ``revision`` by one; a new
+Subscribes to ``odom`` (nav_msgs/Odometry; then also to ``initialpose``, which seeds the first window
+before the localizer has a map) or ``pose`` (PoseWithCovarianceStamped), all in the map frame.
+Callbacks only store the latest pose; a worker thread recomputes the window (window.py), updates the
+tile store (tile_store.py) and publishes ``tile_delta`` (TileDelta), the latched ``map_cloud`` and the
+latched ``~status``. Delta protocol: every broadcast delta increments ``revision`` by one; a new
 subscriber first receives a ``reset`` delta of the whole window carrying the current revision; the
 service ``~resend`` (std_srvs/Trigger) broadcasts a reset delta so a subscriber that saw a revision gap
 can recover.
@@ -99,6 +100,9 @@ class MapProviderNode:
         rospy.Service("~resend", Trigger, self._on_resend)
         if self.config.pose_source == "odom":
             rospy.Subscriber("odom", Odometry, self._on_odom, queue_size=1)
+            # The localizer publishes odom only once it has a map, which in tiles mode comes from here:
+            # the start pose (rviz or the experiment runner) seeds the first window.
+            rospy.Subscriber("initialpose", PoseWithCovarianceStamped, self._on_pose, queue_size=1)
         else:
             rospy.Subscriber("pose", PoseWithCovarianceStamped, self._on_pose, queue_size=1)
         self._worker = threading.Thread(target=self._run, name="map_provider_worker", daemon=True)

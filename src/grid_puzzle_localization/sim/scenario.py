@@ -175,6 +175,7 @@ def _describe(cfg: ScenarioConfig, world, loc: Trajectory, mapping: Trajectory, 
     params = asdict(cfg)
     params.pop("threads")
     return {
+        "scenario": cfg.world,
         "parameters": params,
         "world": {"extent_m": [float(v) for v in world.extent], "triangles": len(world.mesh.faces)},
         "sensor": {k: (v if not isinstance(v, float) else float(v)) for k, v in asdict(sensor).items()},

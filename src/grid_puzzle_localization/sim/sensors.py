@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -77,6 +78,11 @@ class SpinningLidar(Lidar):
         return np.radians(np.linspace(self.elevation_min_deg, self.elevation_max_deg, self.rings))
 
     def sweep(self, index: int) -> Sweep:
+        return self._pattern
+
+    @cached_property
+    def _pattern(self) -> Sweep:
+        """The repeating sweep, computed once (callers must not modify its arrays)."""
         col = np.repeat(np.arange(self.columns), self.rings)
         ring = np.tile(np.arange(self.rings), self.columns)
         dt = col / (self.rate * self.columns) + ring * self.laser_dt

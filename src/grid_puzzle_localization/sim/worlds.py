@@ -172,7 +172,7 @@ def courtyard(seed: int, scale: float) -> World:
             for _ in range(8):
                 depth = max(3.0, rng.uniform(0.18, 0.28) * min(w, h))
                 side = rng.integers(4)
-                span = (h if side < 2 else w) - 2 * inset
+                span = (h if side < 2 else w) - 2 * inset - 0.5  # margin keeps the range below non-empty
                 length = min(rng.uniform(0.35, 0.75) * (h if side < 2 else w), span)
                 if length < 4.0 or depth < 3.0:
                     continue

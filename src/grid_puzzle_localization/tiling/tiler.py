@@ -24,17 +24,18 @@ from pathlib import Path
 from tqdm import tqdm
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.grid import check_grid_size, tile_center, tile_filename, tile_stem
-from grid_puzzle_localization.pcd import PcdHeader, iter_pcd_chunks, read_pcd_header
+from grid_puzzle_localization.grid import check_grid_size, tile_center, tile_filename
+from grid_puzzle_localization.pcd import PcdChunks, PcdHeader, iter_pcd_chunks, read_pcd_header
 from grid_puzzle_localization.pcd.reader import check_xyz
 from grid_puzzle_localization.tiling.buffer import TileBuffer, TileData, write_all
 from grid_puzzle_localization.tiling.grouping import group_chunk
 from grid_puzzle_localization.tiling.index import TileEntry, TileIndex, write_autoware_metadata, write_index
 from grid_puzzle_localization.tiling.outdir import atomic_directory, check_output_dir
-from grid_puzzle_localization.tiling.parallel import run_split
+from grid_puzzle_localization.tiling.parallel import in_background
 
 MIN_MEMORY_MB = 1.0
 _CHUNK_SHARE = 0.30
+MIN_TILES_TO_FORK = 2000  # below this a fork costs more than it saves
 _BUFFER_SHARE = 0.55
 _CHUNK_OVERHEAD_BYTES = 128  # float64/int64 temporaries per point while grouping a chunk
 
@@ -88,84 +89,102 @@ def tile_map(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, co
     show = config.progress and sys.stderr.isatty()
     with atomic_directory(out_dir) as tmp:
         buffer = TileBuffer(dtype.itemsize, int(budget * _BUFFER_SHARE), tmp / ".spill")
-        read = []
-        with tqdm(total=sum(h.points for h in headers), unit="pt", unit_scale=True, disable=not show) as bar:
-            for path in paths:
-                bar.set_description(f"reading {path.name}")
-                chunks = iter_pcd_chunks(path, chunk_points)
-                for chunk in chunks:
-                    buffer.add(*group_chunk(chunk, s))
-                    bar.update(len(chunk))
-                bar.update(chunks.nonfinite_dropped)
-                read.append((path, chunks))
+        read = _stream(paths, headers, buffer, s, chunk_points, show)
         streamed = time.perf_counter()
-        entries = _write_tiles(buffer, tmp, s, headers[0], show, config.processes)
+        tiles = list(buffer.drain())
+        names = [tile_filename(t.i, t.j, s) for t in tiles]
+        texts = _tile_headers(headers[0], tiles)
+        fork = config.processes > 1 and len(tiles) >= MIN_TILES_TO_FORK
+        with in_background(lambda: _write_tile_files(tiles, names, texts, tmp, show), fork):
+            index = _tile_index(s, headers[0], read, tiles, names, texts)
+            write_index(tmp, index)
+            write_autoware_metadata(tmp, index)
         if buffer.spill_dir.exists():
             buffer.spill_dir.rmdir()
-        index = TileIndex(
-            grid_size=s,
-            fields=[
-                {"name": n, "size": z, "type": t, "count": c}
-                for n, z, t, c in zip(
-                    headers[0].fields, headers[0].sizes, headers[0].types, headers[0].counts, strict=True
-                )
-            ],
-            record_bytes=dtype.itemsize,
-            points=sum(e.points for e in entries),
-            nonfinite_dropped=sum(c.nonfinite_dropped for _, c in read),
-            inputs=[
-                {
-                    "path": str(p.resolve()),
-                    "points": c.header.points,
-                    "finite_points": c.points_kept,
-                    "data_bytes": c.header.data_bytes,
-                }
-                for p, c in read
-            ],
-            tiles=entries,
-        )
-        write_index(tmp, index)
-        write_autoware_metadata(tmp, index)
     index.directory = out_dir
     end = time.perf_counter()
     return TileResult(index, buffer.spills, end - start, streamed - start, end - streamed)
 
 
-def _write_tiles(
-    buffer: TileBuffer, directory: Path, s: float, header: PcdHeader, show: bool, processes: int
-) -> list[TileEntry]:
-    """Writes every tile into ``directory`` (which is itself atomic, so files are written in place)."""
+def _stream(
+    paths: list[Path], headers: list[PcdHeader], buffer: TileBuffer, s: float, chunk_points: int, show: bool
+) -> list[tuple[Path, PcdChunks]]:
+    """Reads every input chunk by chunk into the tile buffer; returns the spent chunk readers (counts)."""
+    read = []
+    with tqdm(total=sum(h.points for h in headers), unit="pt", unit_scale=True, disable=not show) as bar:
+        for path in paths:
+            bar.set_description(f"reading {path.name}")
+            chunks = iter_pcd_chunks(path, chunk_points)
+            for chunk in chunks:
+                buffer.add(*group_chunk(chunk, s))
+                bar.update(len(chunk))
+            bar.update(chunks.nonfinite_dropped)
+            read.append((path, chunks))
+    return read
+
+
+def _tile_headers(header: PcdHeader, tiles: list[TileData]) -> list[bytes]:
+    """Binary PCD header of each tile (the input's fields, the tile's point count)."""
     empty = dataclasses.replace(header, data="binary", width=0, height=1, points=0).text()
-    record = header.record_bytes
-    tiles = list(buffer.drain())
-    names = [tile_filename(t.i, t.j, s) for t in tiles]
-    texts = [
+    return [
         empty.replace("\nWIDTH 0\n", f"\nWIDTH {t.points}\n").replace("\nPOINTS 0\n", f"\nPOINTS {t.points}\n").encode()
         for t in tiles
     ]
+
+
+def _write_tile_files(tiles: list[TileData], names: list[str], texts: list[bytes], directory: Path, show: bool) -> None:
+    """Creates the tile files in ``directory`` (itself atomic, so files are written in place)."""
     dir_fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)  # names resolve relative to it: no path work
-
-    def write(share: range) -> None:
-        for k in tqdm(share, desc="writing tiles", unit="tile", disable=not show or share.start != 0):
-            _write_tile(dir_fd, names[k], texts[k], tiles[k])
-
     try:
-        run_split(len(tiles), write, processes)
+        for tile, name, text in tqdm(
+            zip(tiles, names, texts, strict=True), total=len(tiles), desc="writing tiles", unit="tile", disable=not show
+        ):
+            _write_tile(dir_fd, name, text, tile)
     finally:
         os.close(dir_fd)
-    return [
-        TileEntry(
-            key=(t.i, t.j),
-            stem=tile_stem(t.i, t.j, s),
-            file=name,
-            center=(tile_center(t.i, s), tile_center(t.j, s)),
-            points=t.points,
-            bounds={"min": t.bounds_min.tolist(), "max": t.bounds_max.tolist()},
-            bytes=len(text) + t.points * record,
-            data_bytes=t.points * record,
-        )
-        for t, name, text in zip(tiles, names, texts, strict=True)
-    ]
+
+
+def _tile_index(
+    s: float,
+    header: PcdHeader,
+    read: list[tuple[Path, PcdChunks]],
+    tiles: list[TileData],
+    names: list[str],
+    texts: list[bytes],
+) -> TileIndex:
+    record = header.record_bytes
+    return TileIndex(
+        grid_size=s,
+        fields=[
+            {"name": n, "size": z, "type": t, "count": c}
+            for n, z, t, c in zip(header.fields, header.sizes, header.types, header.counts, strict=True)
+        ],
+        record_bytes=record,
+        points=sum(t.points for t in tiles),
+        nonfinite_dropped=sum(c.nonfinite_dropped for _, c in read),
+        inputs=[
+            {
+                "path": str(p.resolve()),
+                "points": c.header.points,
+                "finite_points": c.points_kept,
+                "data_bytes": c.header.data_bytes,
+            }
+            for p, c in read
+        ],
+        tiles=[
+            TileEntry(
+                key=(t.i, t.j),
+                stem=name[: -len(".pcd")],
+                file=name,
+                center=(tile_center(t.i, s), tile_center(t.j, s)),
+                points=t.points,
+                bounds={"min": t.bounds_min.tolist(), "max": t.bounds_max.tolist()},
+                bytes=len(text) + t.points * record,
+                data_bytes=t.points * record,
+            )
+            for t, name, text in zip(tiles, names, texts, strict=True)
+        ],
+    )
 
 
 def _write_tile(dir_fd: int, name: str, header: bytes, tile: TileData) -> None:

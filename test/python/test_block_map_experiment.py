@@ -1,0 +1,38 @@
+"""block_map mode end to end: a tiny simulated courtyard, block maps stitched from its prior map along
+the ground truth, block_map_server feeding the NDT localizer's cloud mode. The localized trajectory must
+stay within 10 cm of the simulator's ground truth, and the storage table must describe the blocks."""
+
+import json
+
+import pytest
+
+from grid_puzzle_localization.cli import main
+
+SECONDS = 15.0  # of simulated walking (the platform rests the first 2 s)
+
+
+@pytest.fixture(scope="module")
+def summary(tmp_path_factory):
+    d = tmp_path_factory.mktemp("block_map_experiment")
+    sim = ["simulate", "courtyard", "--scale", "0.3", "--duration", str(SECONDS), "--seed", "0"]
+    assert main([*sim, "-o", str(d / "scenario"), "--quiet"]) == 0
+    (d / "out").mkdir()
+    experiment = ["experiment", str(d / "scenario"), "-o", str(d / "out"), "--modes", "block_map"]
+    assert main([*experiment, "--block-size", "4", "--ndt-threads", "2", "--settle", "1"]) == 0
+    return json.loads((d / "out" / "summary.json").read_text())
+
+
+def test_block_map_trajectory_stays_within_10_cm_of_ground_truth(summary):
+    ape = summary["modes"]["block_map"]["ape"]["translation_m"]
+    assert ape["pairs"] >= 0.7 * SECONDS * 10  # 10 Hz sweeps; the first ones may wait for the map
+    assert ape["max"] < 0.10
+
+
+def test_storage_rows_for_all_four_maps(summary):
+    storage = summary["storage"]
+    assert set(storage) == {"global_map", "tiles", "block_maps", "fixed_submaps"}
+    assert storage["fixed_submaps"]["overlap_factor"] == 4.0  # 50 % overlap in x and y
+    assert storage["tiles"]["overlap_factor"] == 1.0
+    blocks = storage["block_maps"]
+    assert blocks["files"] >= 2 and blocks["overlap_factor"] >= 1.0
+    assert blocks["mean_bytes_per_file"] == blocks["bytes"] / blocks["files"]

@@ -1,0 +1,65 @@
+"""gpm experiment end to end with the real pieces: a tiny simulated courtyard (6 s of bag), the NDT
+localizer nodelet in global (its own PCD) and grid puzzle (tiles from the provider) modes."""
+
+import json
+
+import numpy as np
+import pytest
+from matplotlib.image import imread
+from process_check import processes_on
+
+from grid_puzzle_localization.cli import main
+from grid_puzzle_localization.evaluation.trajectory import read_tum
+from grid_puzzle_localization.monitor.log import read_csv
+from grid_puzzle_localization.report.build import read_json
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    d = tmp_path_factory.mktemp("integration")
+    scenario, out = d / "scenario", d / "out"
+    sim = ["simulate", "courtyard", "--scale", "0.2", "--duration", "6", "--seed", "2", "-o", str(scenario), "--quiet"]
+    assert main(sim) == 0
+    argv = ["experiment", str(scenario), "-o", str(out), "--preset", "demo", "--interval", "0.25", "--settle", "1.5"]
+    assert main(argv) == 0
+    return scenario, out
+
+
+def test_every_output_exists_and_parses(run):
+    scenario, out = run
+    summary = read_json(out / "summary.json")
+    assert set(summary["modes"]) == {"global", "grid_puzzle"}
+    assert "| Trajectory RMSE, grid puzzle vs global [m] |" in (out / "report.md").read_text()
+    for name in ("cpu", "memory", "trajectories", "errors"):
+        assert imread(out / "plots" / f"{name}.png").ndim == 3
+    gt = read_tum(scenario / "ground_truth.tum")
+    for mode in ("global", "grid_puzzle"):
+        traj = read_tum(out / mode / "trajectory.tum")
+        assert len(traj) >= 40  # 10 Hz scans over 6 s, a few lost while starting
+        assert gt.t[0] - 0.2 <= traj.t[0] and traj.t[-1] <= gt.t[-1] + 0.2
+        log = read_csv(out / mode / "monitor.csv")
+        assert "/localizer_manager" in log.names and len(log) >= 10
+        assert json.loads((out / mode / "monitor.json").read_text())["samples"] == len(log)
+    storage = summary["storage"]["tiles"]
+    assert storage["data_overhead_bytes"] == 0 and storage["points_tiles"] == storage["points_map"]
+
+
+def test_modes_agree_within_5_cm_and_track_ground_truth(run):
+    _scenario, out = run
+    summary = read_json(out / "summary.json")
+    between = summary["between_modes"]["grid_puzzle_vs_global"]["translation_m"]
+    assert between["rmse"] < 0.05 and between["pairs"] >= 40
+    for mode in ("global", "grid_puzzle"):
+        ape = summary["modes"][mode]["ape"]["translation_m"]
+        # The prior map is built with a few centimetres of drift (simulator): 0.3 m bounds a lost track.
+        assert ape["max"] < 0.3, mode
+    paper = summary["modes"]["grid_puzzle"]["resources"]["paper"]
+    assert paper["processes"] == ["/localizer_manager", "/grid_puzzle_map_provider"]
+    assert np.isfinite(paper["cpu_percent"]["mean"]) and paper["rss_bytes"]["mean"] > 10e6
+
+
+def test_no_process_is_left_running(run):
+    _scenario, out = run
+    for outcome in read_json(out / "run.json")["extra"]["outcomes"]:
+        assert outcome["stray_pids"] == []
+        assert processes_on(outcome["master_uri"]) == []
