@@ -7,6 +7,7 @@ from pathlib import Path
 
 from grid_puzzle_localization.blocks.builder import BlockConfig
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.window import PRESETS as PAPER_WINDOWS
 
 MODES = ("global", "grid_puzzle", "block_map")
 
@@ -20,11 +21,12 @@ class WindowPreset:
     grid_size_m: float
 
 
-# The paper's presets (Section IV), and a small one for the demo and the tests.
+# The paper's presets (Section IV, n and k from the window module, s = 2 m), and a small one for the
+# demo and the tests.
+PAPER_GRID_SIZE_M = 2.0
 PRESETS: dict[str, WindowPreset] = {
-    "courtyard": WindowPreset(17, 10, 2.0),
-    "urban": WindowPreset(25, 20, 2.0),
-    "demo": WindowPreset(8, 5, 2.0),
+    **{name: WindowPreset(n, k, PAPER_GRID_SIZE_M) for name, (n, k) in PAPER_WINDOWS.items()},
+    "demo": WindowPreset(8, 5, PAPER_GRID_SIZE_M),
 }
 
 
