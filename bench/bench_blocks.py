@@ -28,7 +28,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from grid_puzzle_localization.blocks.block_cache import BlockCache
-from grid_puzzle_localization.blocks.builder import BlockBuilder, BlockConfig, union_points
+from grid_puzzle_localization.blocks.builder import BlockBuilder, BlockConfig
 from grid_puzzle_localization.blocks.select import BlockSelector
 from grid_puzzle_localization.blocks.storage import storage_table
 from grid_puzzle_localization.blocks.store import XYZ32, read_block_index, write_block_dir
@@ -89,7 +89,8 @@ def build_blocks(points: np.ndarray, tree: cKDTree, path: np.ndarray, config: Bl
         pose[:2, 3] = xy
         scan = points[tree.query_ball_point(xy, SCAN_RADIUS)] - pose[:3, 3]  # sensor frame, identity extrinsic
         builder.add_keyframe(pose, scan)
-    return builder.finish(), builder.report
+    builder.finish()
+    return builder
 
 
 def median_seconds(fn, repeats: int) -> tuple[float, object]:
@@ -121,8 +122,8 @@ def main() -> None:
         tree = cKDTree(points[:, :2])
         path = walk(points)
         config = BlockConfig(args.block_size, 0.0, args.voxel)
-        build_s, (blocks, report) = median_seconds(lambda: build_blocks(points, tree, path, config), args.repeats)
-        union = union_points(blocks, args.voxel)
+        build_s, builder = median_seconds(lambda: build_blocks(points, tree, path, config), args.repeats)
+        blocks, report, union = builder.blocks, builder.report, builder.map_points()
         write_block_dir(
             tmp / "blocks",
             ((b.points, b.centroid, {"keyframes": b.keyframes}) for b in blocks),

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Iterable
 
-from grid_puzzle_localization.blocks.builder import BlockConfig, build_blocks, union_points
+from grid_puzzle_localization.blocks.builder import BlockConfig, PointSets, VoxelClouds, build_blocks
+from grid_puzzle_localization.blocks.keyframes import Scan
 from grid_puzzle_localization.blocks.map_scans import DEFAULT_SCAN_RADIUS
 from grid_puzzle_localization.blocks.poses import parse_extrinsic, read_tum
 from grid_puzzle_localization.blocks.store import write_block_dir
@@ -59,8 +61,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--overwrite", action="store_true", help="replace the output directory if it exists")
 
 
-def _scans(args: argparse.Namespace):
-    """(scans, extrinsic, source description, bag scans or None) from the arguments."""
+def _scans(args: argparse.Namespace, config: BlockConfig) -> tuple[Iterable[Scan], PointSets, dict]:
+    """(scans, how their points are held, source description) from the arguments."""
     if sum(1 for given in (args.bag, args.keyframes, args.map) if given) > 1:
         raise UserError("give one input: --bag (with --trajectory), --keyframes (with --poses) or --map")
     if args.bag:
@@ -72,26 +74,29 @@ def _scans(args: argparse.Namespace):
             parse_extrinsic(args.extrinsic) if args.extrinsic else bag_extrinsic(args.bag, args.topic, args.robot_frame)
         )
         scans = BagScans(args.bag, args.topic, read_tum(args.trajectory))
-        return scans, extrinsic, {"bag": str(args.bag), "topic": args.topic, "trajectory": str(args.trajectory)}
+        source = {"bag": str(args.bag), "topic": args.topic, "trajectory": str(args.trajectory)}
+        return scans, VoxelClouds(config.voxel, extrinsic), {**source, "extrinsic": extrinsic.tolist()}
     if args.keyframes:
         if not args.poses:
             raise UserError("--keyframes needs --poses, a TUM file with one pose per keyframe PCD")
         from grid_puzzle_localization.blocks.pcd_keyframes import pcd_keyframe_scans
 
         scans = pcd_keyframe_scans(args.keyframes, args.poses)
-        return scans, parse_extrinsic(args.extrinsic), {"keyframes": str(args.keyframes), "poses": str(args.poses)}
+        extrinsic = parse_extrinsic(args.extrinsic)
+        source = {"keyframes": str(args.keyframes), "poses": str(args.poses), "extrinsic": extrinsic.tolist()}
+        return scans, VoxelClouds(config.voxel, extrinsic), source
     if args.map:
         if not args.trajectory:
             raise UserError("--map needs --trajectory, a TUM file of the poses to cut pseudo-scans at")
         if not args.scan_radius > 0.0:
             raise UserError(f"--scan-radius must be > 0 m (got {args.scan_radius})")
-        from grid_puzzle_localization.blocks.map_scans import map_scans
+        from grid_puzzle_localization.blocks.map_scans import MapSubsets, map_scans
         from grid_puzzle_localization.pcd import read_pcd, xyz_array
 
         points = xyz_array(read_pcd(args.map).points)
         scans = map_scans(points, read_tum(args.trajectory), args.scan_radius)
         source = {"map": str(args.map), "trajectory": str(args.trajectory), "scan_radius": args.scan_radius}
-        return scans, parse_extrinsic(None), source
+        return scans, MapSubsets(points, config.voxel), source
     raise UserError(
         "no input: give --bag BAG --trajectory TUM, --keyframes DIR --poses TUM, or --map PCD --trajectory TUM"
     )
@@ -99,16 +104,16 @@ def _scans(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     config = BlockConfig(args.size, args.keyframe_spacing, args.voxel).checked()
-    scans, extrinsic, source = _scans(args)
-    blocks, report = build_blocks(scans, config, extrinsic)
+    scans, sets, source = _scans(args, config)
+    builder = build_blocks(scans, config, sets=sets)
+    blocks, report = builder.blocks, builder.report
     if not blocks:
         raise UserError(f"no block was built from {source}: no keyframe with finite points lies inside the poses")
-    map_points = union_points(blocks, config.voxel)
+    map_points = builder.map_points()
     params = {
         "block_size": config.block_size,
         "keyframe_spacing": config.keyframe_spacing,
         "voxel": config.voxel,
-        "extrinsic": extrinsic.tolist(),
         **source,
     }
     index = write_block_dir(

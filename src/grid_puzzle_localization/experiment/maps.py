@@ -33,9 +33,6 @@ def ensure_tiles(global_map: str | os.PathLike, tile_dir: str | os.PathLike, gri
     return tile_dir
 
 
-# Pseudo-scans carry each map point through the robot frame and back, so overlapping keyframes hold copies
-# of it that differ by float rounding; a voxel far finer than any prior map's density merges them into one.
-PSEUDO_SCAN_VOXEL = 0.005  # [m]
 SUBMAP_OVERLAP = 0.5  # overlap ratio of the fixed-size submaps in the storage comparison (grid puzzle paper, Fig. 1)
 
 
@@ -52,15 +49,15 @@ def _fresh(directory: Path, inputs: list[Path], params: dict) -> bool:
 
 def ensure_blocks(global_map: Path, ground_truth: Path, block_dir: Path, block_size_m: float) -> Path:
     """Keyframe-stitched blocks (Algorithm 1) of pseudo-scans cut from ``global_map`` along the ground
-    truth, so block_map mode localizes against the same prior map as the other modes, at its own density
-    (PSEUDO_SCAN_VOXEL only merges copies of a point). Reused while their index matches."""
-    from grid_puzzle_localization.blocks.builder import BlockConfig, build_blocks, union_points
-    from grid_puzzle_localization.blocks.map_scans import DEFAULT_SCAN_RADIUS, map_scans
+    truth, so block_map mode localizes against the same prior map as the other modes: blocks hold the
+    map's own points (no voxel filter). Reused while their index matches."""
+    from grid_puzzle_localization.blocks.builder import BlockConfig, build_blocks
+    from grid_puzzle_localization.blocks.map_scans import DEFAULT_SCAN_RADIUS, MapSubsets, map_scans
     from grid_puzzle_localization.blocks.poses import read_tum
     from grid_puzzle_localization.blocks.store import write_block_dir
     from grid_puzzle_localization.pcd import read_pcd, xyz_array
 
-    config = BlockConfig(block_size=block_size_m, voxel=PSEUDO_SCAN_VOXEL).checked()
+    config = BlockConfig(block_size=block_size_m, voxel=0.0).checked()
     params = {
         "block_size": config.block_size,
         "keyframe_spacing": config.keyframe_spacing,
@@ -75,9 +72,10 @@ def ensure_blocks(global_map: Path, ground_truth: Path, block_dir: Path, block_s
         f"gpm experiment: stitching {block_size_m:g} m block maps of {global_map} along {ground_truth} in {block_dir}"
     )
     points = xyz_array(read_pcd(global_map).points)
-    blocks, _ = build_blocks(map_scans(points, read_tum(ground_truth), DEFAULT_SCAN_RADIUS), config)
-    extras = ((b.points, b.centroid, {"keyframes": b.keyframes}) for b in blocks)
-    write_block_dir(block_dir, extras, "keyframe_blocks", params, union_points(blocks, config.voxel), overwrite=True)
+    scans = map_scans(points, read_tum(ground_truth), DEFAULT_SCAN_RADIUS)
+    builder = build_blocks(scans, config, sets=MapSubsets(points))
+    extras = ((b.points, b.centroid, {"keyframes": b.keyframes}) for b in builder.blocks)
+    write_block_dir(block_dir, extras, "keyframe_blocks", params, builder.map_points(), overwrite=True)
     return block_dir
 
 
