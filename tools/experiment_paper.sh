@@ -1,16 +1,28 @@
 #!/usr/bin/env bash
 # make experiment-paper: both paper scenarios at full size with the paper's presets (courtyard n 17 k 10,
 # urban n 25 k 20, s 2 m). Long-running (simulation plus real-time playback per mode); not part of CI.
-# Scenarios and tiles go to results/paper_data/ (large, not committed); summary, report and plots to
-# results/paper/<scenario>/ (small, committed).
+# Scenarios, tiles, blocks and submaps go to results/paper_data/ (large, not committed); summary, report,
+# plots and the storage table to results/paper/<scenario>/ (small, committed).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 data="$root/results/paper_data"
 gpm=(python3 "$root/scripts/gpm")
+block_size=50 # [m] block size S of the keyframe-stitched blocks and side L of the fixed submaps
+mkdir -p "$data"
 for scenario in courtyard urban; do
-  if [[ ! -f "$data/$scenario/scenario.yaml" ]]; then
-    "${gpm[@]}" simulate "$scenario" -o "$data/$scenario" --overwrite
+  scn="$data/$scenario"
+  out="$root/results/paper/$scenario"
+  if [[ ! -f "$scn/scenario.yaml" ]]; then
+    "${gpm[@]}" simulate "$scenario" -o "$scn" --overwrite
   fi
-  "${gpm[@]}" experiment "$data/$scenario" --preset "$scenario" --tiles "$data/${scenario}_tiles_s2" \
-    -o "$root/results/paper/$scenario"
+  "${gpm[@]}" experiment "$scn" --preset "$scenario" --tiles "$data/${scenario}_tiles_s2" -o "$out"
+  # Storage of the four representations of the same prior map (global, tiles, blocks, fixed submaps).
+  blocks="$data/${scenario}_blocks_S$block_size"
+  submaps="$data/${scenario}_submaps_L$block_size"
+  [[ -f "$blocks/index.yaml" ]] || "${gpm[@]}" blocks "$blocks" --map "$scn/global_map.pcd" \
+    --trajectory "$scn/ground_truth.tum" --size "$block_size" --voxel 0 --overwrite
+  [[ -f "$submaps/index.yaml" ]] || "${gpm[@]}" submaps "$scn/global_map.pcd" "$submaps" --side "$block_size" --overwrite
+  "${gpm[@]}" storage "$scn/global_map.pcd" --tiles "$data/${scenario}_tiles_s2" --blocks "$blocks" \
+    --submaps "$submaps" >"$out/storage.md.tmp"
+  mv "$out/storage.md.tmp" "$out/storage.md"
 done
