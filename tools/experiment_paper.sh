@@ -3,13 +3,15 @@
 # urban n 25 k 20, s 2 m). Long-running (simulation plus real-time playback per mode); not part of CI.
 # Scenarios, tiles, blocks and submaps go to results/paper_data/ (large, not committed); summary, report,
 # plots and the storage table to results/paper/<scenario>/ (small, committed).
+# Arguments: the scenarios to run (default: courtyard urban).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 data="$root/results/paper_data"
 gpm=(python3 "$root/scripts/gpm")
 block_size=50 # [m] block size S of the keyframe-stitched blocks and side L of the fixed submaps
 mkdir -p "$data"
-for scenario in courtyard urban; do
+[[ $# -gt 0 ]] || set -- courtyard urban
+for scenario in "$@"; do
   scn="$data/$scenario"
   out="$root/results/paper/$scenario"
   if [[ ! -f "$scn/scenario.yaml" ]]; then
