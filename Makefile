@@ -90,5 +90,6 @@ bench-blocks: build
 bench-monitor: build
 	@$(SETUP) python3 $(ROOT)/bench/bench_monitor.py
 
+# make experiment-paper [SCENARIOS="courtyard urban"]
 experiment-paper: build
-	@$(SETUP) bash $(ROOT)/tools/experiment_paper.sh
+	@$(SETUP) bash $(ROOT)/tools/experiment_paper.sh $(SCENARIOS)
