@@ -6,8 +6,9 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 out="$root/results/demo"
 scenario="$out/scenario"
-# The full-size courtyard world, 40 s of walking (the map covers the route), the Livox-like sensor as in the paper.
-sim_args=(courtyard --scale 1.0 --duration 40 --seed 1)
+# The full-size courtyard world, 100 s of walking with the first turn (the map covers the route), the
+# Livox-like sensor as in the paper.
+sim_args=(courtyard --scale 1.0 --duration 100 --seed 1)
 stamp="$scenario/.demo-args"
 if [[ ! -f "$scenario/scenario.yaml" || "$(cat "$stamp" 2>/dev/null)" != "${sim_args[*]}" ]]; then
   echo "demo: simulating ${sim_args[*]} into $scenario"
