@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from grid_puzzle_localization.malloc_tuning import reuse_large_buffers
 from grid_puzzle_localization.sim import worlds
 from grid_puzzle_localization.sim.lidar import Mount, SweepSimulator
 from grid_puzzle_localization.sim.raycast import RayCaster
@@ -90,6 +91,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--duration", type=float, default=10.0, help="simulated seconds per scenario")
     args = parser.parse_args()
+    reuse_large_buffers()  # as `gpm simulate` does
     out = {"threads": args.threads, "repeats": args.repeats}
     out.update(_raycast(args.threads, args.repeats, sweeps=30))
     out["courtyard_livox"] = _scenario("courtyard", args.duration, args.threads)

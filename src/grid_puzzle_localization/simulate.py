@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from grid_puzzle_localization.malloc_tuning import reuse_large_buffers
 from grid_puzzle_localization.sim.scenario import ScenarioConfig, generate
 from grid_puzzle_localization.sim.sensors import SENSORS
 from grid_puzzle_localization.sim.worlds import WORLDS
@@ -37,6 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    reuse_large_buffers()  # per-sweep numpy temporaries of several MB: no page faults on each reuse
     cfg = ScenarioConfig(
         world=args.scenario,
         sensor=args.sensor,

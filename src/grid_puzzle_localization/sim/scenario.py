@@ -29,6 +29,7 @@ from grid_puzzle_localization.sim.imu import ImuNoise, simulate_imu, true_motion
 from grid_puzzle_localization.sim.lidar import Mount, SweepSimulator
 from grid_puzzle_localization.sim.mapping import MAP_DTYPE, DriftBounds, VoxelMap, drifted, to_map
 from grid_puzzle_localization.sim.movers import Movers, make_movers
+from grid_puzzle_localization.sim.ordered import ordered_map
 from grid_puzzle_localization.sim.raycast import RayCaster
 from grid_puzzle_localization.sim.sensors import DEFAULT_SENSOR, get_sensor
 from grid_puzzle_localization.sim.trajectory import RATE, Trajectory, localization_trajectory, mapping_trajectory
@@ -92,8 +93,8 @@ class Summary:
     seconds_mapping: float
 
 
-def _rng(seed: int, stream: int) -> np.random.Generator:
-    return np.random.default_rng([seed, stream])
+def _rng(seed: int, *stream: int) -> np.random.Generator:
+    return np.random.default_rng([seed, *stream])
 
 
 def _progress(total: int, desc: str, show: bool):
@@ -121,26 +122,30 @@ def _write_bag(
     gt_step = round(RATE / GROUND_TRUTH_RATE)
     samples_per_sweep = round(RATE / sensor.rate)
     n_sweeps = int(np.floor(traj.duration * sensor.rate + 1e-9))
-    rng = _rng(cfg.seed, 4)
+
+    def sweep_cloud(k: int) -> tuple[int, np.ndarray]:
+        sweep = sensor.sweep(k)
+        t_mid = (k + 0.5) / sensor.rate
+        frozen = movers.mesh_at(t_mid, traj.interpolate(np.array([t_mid]))[0][0, :2])
+        return len(sweep.dt), sim.simulate(traj, k / sensor.rate, sweep, _rng(cfg.seed, 4, k), frozen)
+
+    period_ns, sweep_ns = round(1e9 / RATE), round(1e9 / sensor.rate)
+    t0_ns = round(t0 * 1e9)
     rays = points = 0
     with ScenarioBag(str(path), BagNames()) as bag, _progress(n_sweeps, "localization run", show) as bar:
         bag.write_tf_static(t0, mount.translation, Rotation.from_matrix(mount.rotation).as_quat())
 
         def motion(i0: int, i1: int) -> None:
-            for i in range(i0, min(i1, len(traj.position))):
-                t = t0 + i / RATE
-                bag.write_imu(t, imu.gyro[i], imu.accel[i], gyro_var, accel_var)
-                if i % gt_step == 0:
-                    bag.write_ground_truth(t, traj.position[i], traj.quat[i], vel_body[i], gyro_true[i])
+            """IMU and ground truth samples i0 .. i1 - 1 (ground truth every gt_step-th sample)."""
+            i = np.arange(i0, min(i1, len(traj.position)))
+            bag.write_imu(t0_ns + i * period_ns, imu.gyro[i], imu.accel[i], gyro_var, accel_var)
+            g = i[i % gt_step == 0]
+            bag.write_ground_truth(t0_ns + g * period_ns, traj.position[g], traj.quat[g], vel_body[g], gyro_true[g])
 
-        for k in range(n_sweeps):
+        for k, (n_rays, cloud) in enumerate(ordered_map(sweep_cloud, n_sweeps, cfg.threads)):
             motion(k * samples_per_sweep, (k + 1) * samples_per_sweep)
-            sweep = sensor.sweep(k)
-            t_mid = (k + 0.5) / sensor.rate
-            frozen = movers.mesh_at(t_mid, traj.interpolate(np.array([t_mid]))[0][0, :2])
-            cloud = sim.simulate(traj, k / sensor.rate, sweep, rng, frozen)
-            bag.write_points(t0 + k / sensor.rate, t0 + (k + 1) / sensor.rate, cloud)
-            rays += len(sweep.dt)
+            bag.write_points(t0_ns + k * sweep_ns, t0_ns + (k + 1) * sweep_ns, cloud)
+            rays += n_rays
             points += len(cloud)
             bar.update()
         motion(n_sweeps * samples_per_sweep, len(traj.position))
@@ -151,16 +156,19 @@ def _write_map(path: Path, cfg: ScenarioConfig, sim: SweepSimulator, traj: Traje
     estimate = drifted(traj, cfg.drift, _rng(cfg.seed, 3))
     voxels = VoxelMap(cfg.map_leaf)
     sensor = sim.sensor
-    rng = _rng(cfg.seed, 5)
     n_sweeps = int(np.floor(traj.duration * sensor.rate + 1e-9))
+
+    def placed_sweep(k: int) -> tuple[int, np.ndarray, np.ndarray]:
+        sweep = sensor.sweep(k)
+        cloud = sim.simulate(traj, k / sensor.rate, sweep, _rng(cfg.seed, 5, k))
+        return len(sweep.dt), to_map(estimate, mount, k / sensor.rate, cloud), cloud["intensity"]
+
     rays = points = 0
     with _progress(n_sweeps, "mapping run", show) as bar:
-        for k in range(n_sweeps):
-            sweep = sensor.sweep(k)
-            cloud = sim.simulate(traj, k / sensor.rate, sweep, rng)
-            voxels.add(to_map(estimate, mount, k / sensor.rate, cloud), cloud["intensity"])
-            rays += len(sweep.dt)
-            points += len(cloud)
+        for n_rays, xyz, intensity in ordered_map(placed_sweep, n_sweeps, cfg.threads):
+            voxels.add(xyz, intensity)
+            rays += n_rays
+            points += len(xyz)
             bar.update()
     with PcdStreamWriter(path, MAP_DTYPE) as writer:
         for chunk in voxels.chunks():
@@ -212,7 +220,7 @@ def generate(
     mapping = mapping_trajectory(world, loc, _rng(cfg.seed, 2))
     movers = make_movers(world, cfg.scale, loc.duration, cfg.movers, _rng(cfg.seed, 7))
     mount = Mount(np.array(MOUNTS[cfg.world]), np.eye(3))
-    with atomic_directory(out) as tmp, RayCaster(world.mesh, cfg.threads) as caster:
+    with atomic_directory(out) as tmp, RayCaster(world.mesh, threads=1) as caster:
         sim = SweepSimulator(world.mesh, caster, get_sensor(cfg.sensor), mount)
         (tmp / "scenario.yaml").write_text(
             yaml.safe_dump(_describe(cfg, world, loc, mapping, mount, movers), sort_keys=False)
