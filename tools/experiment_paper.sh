@@ -9,7 +9,7 @@ data="$root/results/paper_data"
 gpm=(python3 "$root/scripts/gpm")
 for scenario in courtyard urban; do
   if [[ ! -f "$data/$scenario/scenario.yaml" ]]; then
-    "${gpm[@]}" simulate "$scenario" -o "$data/$scenario" --overwrite
+    "${gpm[@]}" simulate "$scenario" -o "$data/$scenario" --force
   fi
   "${gpm[@]}" experiment "$data/$scenario" --preset "$scenario" --tiles "$data/${scenario}_tiles_s2" \
     -o "$root/results/paper/$scenario"

@@ -12,7 +12,9 @@ from grid_puzzle_localization.sim.worlds import WORLDS
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scenario", help=f"world to simulate: {', '.join(WORLDS)}")
-    parser.add_argument("-o", "--output", help="output directory (default: ./<scenario>); must not exist")
+    parser.add_argument(
+        "-o", "--output", help="output directory (default: ./<scenario>); must be absent or empty unless --force"
+    )
     parser.add_argument(
         "--sensor", help=f"LiDAR model: {', '.join(SENSORS)} (default: livox for courtyard, hdl32 for urban)"
     )
@@ -33,7 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="moving pedestrians/cars in the scans, not in the map (default 12 x scale / 20 x scale in urban)",
     )
     parser.add_argument("--threads", type=int, default=2, help="ray-casting threads (default 2)")
-    parser.add_argument("--overwrite", action="store_true", help="replace an existing output directory")
+    parser.add_argument("--force", action="store_true", help="replace a non-empty output directory")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -50,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
         threads=args.threads,
         movers=args.movers,
     )
-    summary = generate(cfg, args.output or args.scenario, overwrite=args.overwrite, progress=not args.quiet)
+    summary = generate(cfg, args.output or args.scenario, force=args.force, progress=not args.quiet)
     print(
         f"{summary.directory}: {summary.duration:.1f} s, {summary.sweeps} sweeps, {summary.points} points; "
         f"prior map {summary.map_points} points from {summary.map_sweeps} sweeps"

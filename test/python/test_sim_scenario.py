@@ -204,7 +204,8 @@ def test_bad_parameters_are_clear_errors(argv, needle, tmp_path, capsys):
 
 def test_existing_output_is_refused_and_interrupt_leaves_nothing(tmp_path, monkeypatch):
     (tmp_path / "taken").mkdir()
-    with pytest.raises(UserError, match="already exists"):
+    (tmp_path / "taken" / "old.txt").write_text("old")
+    with pytest.raises(UserError, match="not empty; choose another one or pass --force"):
         generate(TINY, tmp_path / "taken", progress=False)
 
     def interrupted(*args, **kwargs):
@@ -214,3 +215,4 @@ def test_existing_output_is_refused_and_interrupt_leaves_nothing(tmp_path, monke
     with pytest.raises(KeyboardInterrupt):
         generate(TINY, tmp_path / "out", progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["taken"]
+    assert [p.name for p in (tmp_path / "taken").iterdir()] == ["old.txt"]

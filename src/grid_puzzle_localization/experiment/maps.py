@@ -77,7 +77,7 @@ def ensure_blocks(global_map: Path, ground_truth: Path, block_dir: Path, block_s
     points = xyz_array(read_pcd(global_map).points)
     blocks, _ = build_blocks(map_scans(points, read_tum(ground_truth), DEFAULT_SCAN_RADIUS), config)
     extras = ((b.points, b.centroid, {"keyframes": b.keyframes}) for b in blocks)
-    write_block_dir(block_dir, extras, "keyframe_blocks", params, union_points(blocks, config.voxel), overwrite=True)
+    write_block_dir(block_dir, extras, "keyframe_blocks", params, union_points(blocks, config.voxel), force=True)
     return block_dir
 
 
@@ -92,5 +92,5 @@ def ensure_submaps(global_map: Path, submap_dir: Path, side_m: float) -> Path:
     params = {"side": config.side, "overlap": config.overlap, "map": str(global_map)}
     if _fresh(submap_dir, [global_map], params):
         return submap_dir
-    write_submaps(xyz_array(read_pcd(global_map).points), config, submap_dir, global_map, overwrite=True)
+    write_submaps(xyz_array(read_pcd(global_map).points), config, submap_dir, global_map, force=True)
     return submap_dir

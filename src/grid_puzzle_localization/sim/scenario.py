@@ -22,7 +22,7 @@ import yaml
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
-from grid_puzzle_localization.atomic import atomic_directory
+from grid_puzzle_localization.atomic import atomic_directory, check_output_dir
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.pcd import PcdStreamWriter
 from grid_puzzle_localization.sim.imu import ImuNoise, simulate_imu, true_motion
@@ -203,17 +203,12 @@ def _describe(cfg: ScenarioConfig, world, loc: Trajectory, mapping: Trajectory, 
     }
 
 
-def generate(
-    cfg: ScenarioConfig, out_dir: str | os.PathLike, overwrite: bool = False, progress: bool = True
-) -> Summary:
-    """Simulates the scenario ``cfg`` into ``out_dir`` (must not exist unless ``overwrite``)."""
+def generate(cfg: ScenarioConfig, out_dir: str | os.PathLike, force: bool = False, progress: bool = True) -> Summary:
+    """Simulates the scenario ``cfg`` into ``out_dir`` (absent or empty, or replaced with ``force``)."""
     cfg = cfg.resolved()
     world = make_world(cfg.world, cfg.seed, cfg.scale)
     out = Path(out_dir).absolute()
-    if out.exists() and not overwrite:
-        raise UserError(f"output directory {out} already exists: choose another --output or pass --overwrite")
-    if not out.parent.is_dir():
-        raise UserError(f"cannot create {out}: parent directory {out.parent} does not exist")
+    check_output_dir(out, force)
     loc = localization_trajectory(world, cfg.scale, _rng(cfg.seed, 1))
     if cfg.duration is not None:
         loc = loc.truncated(cfg.duration)
