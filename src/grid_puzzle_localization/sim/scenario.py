@@ -24,6 +24,7 @@ from tqdm import tqdm
 
 from grid_puzzle_localization.atomic import atomic_directory, check_output_dir
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.evaluation import trajectory as tum
 from grid_puzzle_localization.pcd import PcdStreamWriter
 from grid_puzzle_localization.sim.imu import ImuNoise, simulate_imu, true_motion
 from grid_puzzle_localization.sim.lidar import Mount, SweepSimulator
@@ -102,10 +103,12 @@ def _progress(total: int, desc: str, show: bool):
 
 
 def _write_tum(path: Path, t0: float, traj: Trajectory) -> None:
+    """base_link in map at GROUND_TRUTH_RATE, stamped in exact nanoseconds like the bag."""
     step = round(RATE / GROUND_TRUTH_RATE)
-    stamps = t0 + traj.times[::step]
-    data = np.column_stack([stamps, traj.position[::step], traj.quat[::step]])
-    np.savetxt(path, data, fmt=["%.6f"] + ["%.6f"] * 3 + ["%.9f"] * 4, header="timestamp tx ty tz qx qy qz qw")
+    i = np.arange(0, len(traj.position), step)
+    stamps_ns = round(t0 * 1e9) + i * round(1e9 / RATE)
+    truth = tum.make_trajectory(stamps_ns * 1e-9, traj.position[i], traj.quat[i], source="ground truth")
+    tum.write_tum(path, truth, stamps_ns)
 
 
 def _write_bag(
