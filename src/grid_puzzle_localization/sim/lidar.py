@@ -34,7 +34,9 @@ def _may_hit(origin: np.ndarray, direction: np.ndarray, mesh: Mesh) -> np.ndarra
     its centre ``m``, that azimuth is within asin((rho + spread) / |m - c|) of the azimuth of ``m - c``.
     Rays are binned by azimuth (float32 rounding is covered by one extra bin either side); if any
     triangle is that close to the origins, every ray is a candidate."""
-    lo, hi = origin[:, :2].min(axis=0).astype(np.float64), origin[:, :2].max(axis=0).astype(np.float64)
+    # Column by column: numpy's axis-0 reduction of an (n, 2) view is some 20 times slower.
+    lo = np.array([float(origin[:, a].min()) for a in (0, 1)])
+    hi = np.array([float(origin[:, a].max()) for a in (0, 1)])
     centre, spread = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2
     tri = mesh.triangles[:, :, :2].astype(np.float64)
     mid = tri.mean(axis=1)

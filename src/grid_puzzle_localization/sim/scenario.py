@@ -79,7 +79,8 @@ class ScenarioConfig:
 
 @dataclass
 class Summary:
-    """What a run produced and how long each pass took (wall-clock seconds)."""
+    """What a run produced and how long each pass took: wall-clock seconds and CPU seconds of the
+    process (all threads), so figures from a shared machine can be judged."""
 
     directory: Path
     duration: float
@@ -92,6 +93,8 @@ class Summary:
     map_points: int  # points in global_map.pcd
     seconds_localization: float
     seconds_mapping: float
+    cpu_seconds_localization: float
+    cpu_seconds_mapping: float
 
 
 def _rng(seed: int, *stream: int) -> np.random.Generator:
@@ -224,16 +227,28 @@ def generate(cfg: ScenarioConfig, out_dir: str | os.PathLike, force: bool = Fals
             yaml.safe_dump(_describe(cfg, world, loc, mapping, mount, movers), sort_keys=False)
         )
         _write_tum(tmp / "ground_truth.tum", cfg.start_time, loc)
-        start = time.perf_counter()
+        start, cpu_start = time.perf_counter(), time.process_time()
         sweeps, rays, points = _write_bag(tmp / "scenario.bag", cfg, sim, loc, mount, movers, progress)
-        mid = time.perf_counter()
+        mid, cpu_mid = time.perf_counter(), time.process_time()
         map_sweeps, map_rays, map_in, map_points = _write_map(
             tmp / "global_map.pcd", cfg, sim, mapping, mount, progress
         )
-        end = time.perf_counter()
+        end, cpu_end = time.perf_counter(), time.process_time()
         for name in FILES:  # on disk before the directory is published
             with open(tmp / name, "rb") as f:
                 os.fsync(f.fileno())
     return Summary(
-        out, loc.duration, sweeps, rays, points, map_sweeps, map_rays, map_in, map_points, mid - start, end - mid
+        out,
+        loc.duration,
+        sweeps,
+        rays,
+        points,
+        map_sweeps,
+        map_rays,
+        map_in,
+        map_points,
+        mid - start,
+        end - mid,
+        cpu_mid - cpu_start,
+        cpu_end - cpu_mid,
     )
