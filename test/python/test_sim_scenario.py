@@ -2,6 +2,7 @@
 
 import filecmp
 import itertools
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -35,6 +36,14 @@ def test_same_seed_gives_byte_identical_files(tiny, tmp_path):
         assert filecmp.cmp(tiny / "a" / name, tiny / "b" / name, shallow=False), name
     a, b = worlds.make_world("courtyard", 7, 0.25).mesh, worlds.make_world("courtyard", 8, 0.25).mesh
     assert a.vertices.shape != b.vertices.shape or not np.array_equal(a.vertices, b.vertices)
+
+
+def test_thread_count_does_not_change_the_output(tiny, tmp_path):
+    generate(replace(TINY, threads=1), tmp_path / "one", progress=False)
+    generate(replace(TINY, threads=3), tmp_path / "three", progress=False)
+    for name in FILES:
+        assert filecmp.cmp(tiny / "a" / name, tmp_path / "one" / name, shallow=False), name
+        assert filecmp.cmp(tiny / "a" / name, tmp_path / "three" / name, shallow=False), name
 
 
 def test_movers_are_in_the_scans_but_not_in_the_map(tiny, tmp_path):
