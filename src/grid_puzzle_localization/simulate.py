@@ -34,7 +34,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=int,
         help="moving pedestrians/cars in the scans, not in the map (default 12 x scale / 20 x scale in urban)",
     )
-    parser.add_argument("--threads", type=int, default=2, help="ray-casting threads (default 2)")
+    parser.add_argument(
+        "--threads", type=int, default=2, help="sweep worker threads (default 2; same output for any count)"
+    )
     parser.add_argument("--force", action="store_true", help="replace a non-empty output directory")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 

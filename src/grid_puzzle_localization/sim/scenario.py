@@ -54,7 +54,7 @@ class ScenarioConfig:
     duration: float | None = None  # [s] of the localization run; None: the whole route
     map_leaf: float | None = None  # [m] voxel size of the prior map
     start_time: float = 1.7e9  # [s] bag time of the first sample
-    threads: int = 2  # ray-casting threads (the output does not depend on it)
+    threads: int = 2  # sweep worker threads (the output does not depend on it)
     movers: int | None = None  # moving pedestrians/cars in the scans (not in the map); None: world default
     drift: DriftBounds = field(default_factory=DriftBounds)
     imu_noise: ImuNoise = field(default_factory=ImuNoise)
@@ -105,11 +105,16 @@ def _progress(total: int, desc: str, show: bool):
     return tqdm(total=total, desc=desc, unit="sweep", file=sys.stderr, disable=not show, mininterval=1.0)
 
 
+def _sample_stamps_ns(t0: float, samples: np.ndarray) -> np.ndarray:
+    """Exact stamps [ns] of trajectory samples (indices at RATE) of a run starting at ``t0`` [s]."""
+    return round(t0 * 1e9) + samples * round(1e9 / RATE)
+
+
 def _write_tum(path: Path, t0: float, traj: Trajectory) -> None:
     """base_link in map at GROUND_TRUTH_RATE, stamped in exact nanoseconds like the bag."""
     step = round(RATE / GROUND_TRUTH_RATE)
     i = np.arange(0, len(traj.position), step)
-    stamps_ns = round(t0 * 1e9) + i * round(1e9 / RATE)
+    stamps_ns = _sample_stamps_ns(t0, i)
     truth = tum.make_trajectory(stamps_ns * 1e-9, traj.position[i], traj.quat[i], source="ground truth")
     tum.write_tum(path, truth, stamps_ns)
 
@@ -135,8 +140,6 @@ def _write_bag(
         frozen = movers.mesh_at(t_mid, traj.interpolate(np.array([t_mid]))[0][0, :2])
         return len(sweep.dt), sim.simulate(traj, k / sensor.rate, sweep, _rng(cfg.seed, 4, k), frozen)
 
-    period_ns, sweep_ns = round(1e9 / RATE), round(1e9 / sensor.rate)
-    t0_ns = round(t0 * 1e9)
     rays = points = 0
     with ScenarioBag(str(path), BagNames()) as bag, _progress(n_sweeps, "localization run", show) as bar:
         bag.write_tf_static(t0, mount.translation, Rotation.from_matrix(mount.rotation).as_quat())
@@ -144,13 +147,15 @@ def _write_bag(
         def motion(i0: int, i1: int) -> None:
             """IMU and ground truth samples i0 .. i1 - 1 (ground truth every gt_step-th sample)."""
             i = np.arange(i0, min(i1, len(traj.position)))
-            bag.write_imu(t0_ns + i * period_ns, imu.gyro[i], imu.accel[i], gyro_var, accel_var)
+            bag.write_imu(_sample_stamps_ns(t0, i), imu.gyro[i], imu.accel[i], gyro_var, accel_var)
             g = i[i % gt_step == 0]
-            bag.write_ground_truth(t0_ns + g * period_ns, traj.position[g], traj.quat[g], vel_body[g], gyro_true[g])
+            stamps = _sample_stamps_ns(t0, g)
+            bag.write_ground_truth(stamps, traj.position[g], traj.quat[g], vel_body[g], gyro_true[g])
 
         for k, (n_rays, cloud) in enumerate(ordered_map(sweep_cloud, n_sweeps, cfg.threads)):
             motion(k * samples_per_sweep, (k + 1) * samples_per_sweep)
-            bag.write_points(t0_ns + k * sweep_ns, t0_ns + (k + 1) * sweep_ns, cloud)
+            start, end = _sample_stamps_ns(t0, np.array([k, k + 1]) * samples_per_sweep)
+            bag.write_points(int(start), int(end), cloud)
             rays += n_rays
             points += len(cloud)
             bar.update()
