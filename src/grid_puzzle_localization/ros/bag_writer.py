@@ -41,10 +41,9 @@ def _stamp(t: float) -> rospy.Time:
     return rospy.Time(nsecs=round(t * 1e9))
 
 
-def _header_fields(frame: str, prefix: str = "") -> list[tuple]:
+def _header_fields(frame: str) -> list[tuple]:
     """Serialized std_msgs/Header (seq, stamp, frame_id) as packed numpy fields."""
-    fields = [(f"{prefix}seq", "<u4"), (f"{prefix}secs", "<u4"), (f"{prefix}nsecs", "<u4")]
-    return fields + _string_fields(frame, f"{prefix}frame")
+    return [("seq", "<u4"), ("secs", "<u4"), ("nsecs", "<u4"), *_string_fields(frame, "frame")]
 
 
 def _string_fields(text: str, name: str) -> list[tuple]:

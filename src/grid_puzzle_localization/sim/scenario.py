@@ -14,6 +14,7 @@ import math
 import os
 import sys
 import time
+from contextlib import closing
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -141,7 +142,12 @@ def _write_bag(
         return len(sweep.dt), sim.simulate(traj, k / sensor.rate, sweep, _rng(cfg.seed, 4, k), frozen)
 
     rays = points = 0
-    with ScenarioBag(str(path), BagNames()) as bag, _progress(n_sweeps, "localization run", show) as bar:
+    clouds = ordered_map(sweep_cloud, n_sweeps, cfg.threads)
+    with (
+        ScenarioBag(str(path), BagNames()) as bag,
+        _progress(n_sweeps, "localization run", show) as bar,
+        closing(clouds),  # an error stops the queued sweeps at once
+    ):
         bag.write_tf_static(t0, mount.translation, Rotation.from_matrix(mount.rotation).as_quat())
 
         def motion(i0: int, i1: int) -> None:
@@ -152,7 +158,7 @@ def _write_bag(
             stamps = _sample_stamps_ns(t0, g)
             bag.write_ground_truth(stamps, traj.position[g], traj.quat[g], vel_body[g], gyro_true[g])
 
-        for k, (n_rays, cloud) in enumerate(ordered_map(sweep_cloud, n_sweeps, cfg.threads)):
+        for k, (n_rays, cloud) in enumerate(clouds):
             motion(k * samples_per_sweep, (k + 1) * samples_per_sweep)
             start, end = _sample_stamps_ns(t0, np.array([k, k + 1]) * samples_per_sweep)
             bag.write_points(int(start), int(end), cloud)
@@ -175,8 +181,9 @@ def _write_map(path: Path, cfg: ScenarioConfig, sim: SweepSimulator, traj: Traje
         return len(sweep.dt), to_map(estimate, mount, k / sensor.rate, cloud), cloud["intensity"]
 
     rays = points = 0
-    with _progress(n_sweeps, "mapping run", show) as bar:
-        for n_rays, xyz, intensity in ordered_map(placed_sweep, n_sweeps, cfg.threads):
+    swept = ordered_map(placed_sweep, n_sweeps, cfg.threads)
+    with _progress(n_sweeps, "mapping run", show) as bar, closing(swept):
+        for n_rays, xyz, intensity in swept:
             voxels.add(xyz, intensity)
             rays += n_rays
             points += len(xyz)
