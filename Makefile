@@ -76,7 +76,10 @@ tsan-localizer: setup
 
 # ---------------------------------------------------------------- scenario simulator
 .PHONY: bench-sim
-bench-sim: build
+# Build output goes to build/bench_sim_build.log so stdout holds only the JSON.
+bench-sim: setup
+	@log=$(ROOT)/build/bench_sim_build.log; mkdir -p $(ROOT)/build; \
+	  bash $(ROOT)/tools/build.sh >$$log 2>&1 || { tail -40 $$log; exit 1; }
 	@$(SETUP) python3 $(ROOT)/bench/bench_sim.py
 
 # ---------------------------------------------------------------- block maps

@@ -116,7 +116,7 @@ def main() -> None:
         record = np.empty(len(points), dtype=XYZ32)
         record["x"], record["y"], record["z"] = points.T
         write_pcd(tmp / "map.pcd", record)
-        submap_args = ["submaps", str(tmp / "map.pcd"), str(tmp / "submaps"), "--overwrite"]
+        submap_args = ["submaps", str(tmp / "map.pcd"), str(tmp / "submaps"), "--force"]
         submap_args += ["--side", str(args.side), "--overlap", str(args.overlap)]
         cut_s, _ = median_seconds(lambda: gpm(submap_args), args.repeats)
         tree = cKDTree(points[:, :2])

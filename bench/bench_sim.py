@@ -2,10 +2,12 @@
 """Benchmark of `gpm simulate`: prints one JSON object.
 
 - rays_per_s: Embree ray casting of HDL-32E-like sweeps in the full-scale urban world (median of repeats);
-- sweep_rays_per_s: the same including per-ray poses, noise and point packing;
-- per sensor, on its full-scale default world: seconds of wall time per simulated second of the
-  localization run (sweeps + IMU + bag writing), and prior-map points accumulated per second of the
-  mapping run, plus the final map size;
+- sweep_rays_per_s: the same including per-ray poses, noise and point packing, one sweep per thread
+  as `gpm simulate` runs them;
+- per sensor, on its full-scale default world, end to end: seconds of wall time per simulated second of
+  the localization run and its rays per second (sweeps, movers, IMU, bag writing), the mapping run's rays
+  per second, both together (generation_rays_per_s), rays per CPU-second of the process (all threads;
+  meaningful on a shared machine) and prior-map points accumulated per second, plus the final map size;
 - peak RSS of this process and hardware info (CPU model, cores, threads used).
 """
 
@@ -23,8 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
+from grid_puzzle_localization.malloc_tuning import reuse_large_buffers
 from grid_puzzle_localization.sim import worlds
 from grid_puzzle_localization.sim.lidar import Mount, SweepSimulator
+from grid_puzzle_localization.sim.ordered import ordered_map
 from grid_puzzle_localization.sim.raycast import RayCaster
 from grid_puzzle_localization.sim.scenario import MOUNTS, ScenarioConfig, _rng, generate
 from grid_puzzle_localization.sim.sensors import SENSORS
@@ -55,10 +59,16 @@ def _raycast(threads: int, repeats: int, sweeps: int) -> dict:
             for origin, direction in rays:
                 caster.cast(origin, direction)
             cast_rates.append(sweeps * sensor.rays_per_sweep / (time.perf_counter() - start))
-            rng = np.random.default_rng(0)
+    with RayCaster(world.mesh, threads=1) as caster:  # as in `gpm simulate`: one sweep per worker thread
+        sim = SweepSimulator(world.mesh, caster, sensor, Mount(np.array(MOUNTS["urban"]), np.eye(3)))
+
+        def one(k: int) -> np.ndarray:
+            return sim.simulate(traj, 100.0 + k / sensor.rate, sensor.sweep(k), np.random.default_rng(k))
+
+        for _ in range(repeats):
             start = time.perf_counter()
-            for k in range(sweeps):
-                sim.simulate(traj, 100.0 + k / sensor.rate, sensor.sweep(k), rng)
+            for _ in ordered_map(one, sweeps, threads):
+                pass
             sweep_rates.append(sweeps * sensor.rays_per_sweep / (time.perf_counter() - start))
     return {
         "rays_per_s": round(statistics.median(cast_rates)),
@@ -67,18 +77,33 @@ def _raycast(threads: int, repeats: int, sweeps: int) -> dict:
     }
 
 
-def _scenario(world: str, duration: float, threads: int) -> dict:
+def _scenario(world: str, duration: float, threads: int, repeats: int) -> dict:
+    """End-to-end `gpm simulate` figures, each the median over ``repeats`` runs (the output is identical)."""
     cfg = ScenarioConfig(world=world, duration=duration, threads=threads)
-    with tempfile.TemporaryDirectory(dir=os.environ.get("TMPDIR", "/tmp")) as tmp:
-        s = generate(cfg, Path(tmp) / world, progress=False)
-        sizes = {p.name: p.stat().st_size for p in s.directory.iterdir()}
+    runs = []
+    for _ in range(repeats):
+        with tempfile.TemporaryDirectory(dir=os.environ.get("TMPDIR", "/tmp")) as tmp:
+            s = generate(cfg, Path(tmp) / world, progress=False)
+            sizes = {p.name: p.stat().st_size for p in s.directory.iterdir()}
+        runs.append(s)
+
+    def median(f) -> float:
+        return statistics.median(f(s) for s in runs)
+
+    s = runs[0]
     return {
         "sensor": cfg.resolved().sensor,
         "simulated_s": round(s.duration, 3),
-        "seconds_per_simulated_second": round(s.seconds_localization / s.duration, 3),
-        "localization_rays_per_s": round(s.rays / s.seconds_localization),
+        "seconds_per_simulated_second": round(median(lambda r: r.seconds_localization / r.duration), 3),
+        "localization_rays_per_s": round(median(lambda r: r.rays / r.seconds_localization)),
+        "mapping_rays_per_s": round(median(lambda r: r.map_rays / r.seconds_mapping)),
+        "generation_rays_per_s": round(
+            median(lambda r: (r.rays + r.map_rays) / (r.seconds_localization + r.seconds_mapping))
+        ),
+        "localization_rays_per_cpu_s": round(median(lambda r: r.rays / r.cpu_seconds_localization)),
+        "mapping_rays_per_cpu_s": round(median(lambda r: r.map_rays / r.cpu_seconds_mapping)),
         "mapping_run_s": round(s.map_sweeps / 10.0, 1),
-        "map_input_points_per_s": round(s.map_points_in / s.seconds_mapping),
+        "map_input_points_per_s": round(median(lambda r: r.map_points_in / r.seconds_mapping)),
         "map_points": s.map_points,
         "bag_mb_per_simulated_s": round(sizes["scenario.bag"] / 1e6 / s.duration, 2),
     }
@@ -90,10 +115,11 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--duration", type=float, default=10.0, help="simulated seconds per scenario")
     args = parser.parse_args()
+    reuse_large_buffers()  # as `gpm simulate` does
     out = {"threads": args.threads, "repeats": args.repeats}
     out.update(_raycast(args.threads, args.repeats, sweeps=30))
-    out["courtyard_livox"] = _scenario("courtyard", args.duration, args.threads)
-    out["urban_hdl32"] = _scenario("urban", args.duration, args.threads)
+    out["courtyard_livox"] = _scenario("courtyard", args.duration, args.threads, args.repeats)
+    out["urban_hdl32"] = _scenario("urban", args.duration, args.threads, args.repeats)
     out["peak_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
     out["hardware"] = {
         "cpu": _cpu_model(),

@@ -13,7 +13,7 @@ stamp="$scenario/.demo-args"
 if [[ ! -f "$scenario/scenario.yaml" || "$(cat "$stamp" 2>/dev/null)" != "${sim_args[*]}" ]]; then
   echo "demo: simulating ${sim_args[*]} into $scenario"
   mkdir -p "$out"
-  python3 "$root/scripts/gpm" simulate "${sim_args[@]}" -o "$scenario" --overwrite --quiet
+  python3 "$root/scripts/gpm" simulate "${sim_args[@]}" -o "$scenario" --force --quiet
   echo "${sim_args[*]}" >"$stamp"
 else
   echo "demo: reusing the scenario in $scenario"

@@ -15,15 +15,15 @@ for scenario in "$@"; do
   scn="$data/$scenario"
   out="$root/results/paper/$scenario"
   if [[ ! -f "$scn/scenario.yaml" ]]; then
-    "${gpm[@]}" simulate "$scenario" -o "$scn" --overwrite
+    "${gpm[@]}" simulate "$scenario" -o "$scn" --force
   fi
   "${gpm[@]}" experiment "$scn" --preset "$scenario" --tiles "$data/${scenario}_tiles_s2" -o "$out"
   # Storage of the four representations of the same prior map (global, tiles, blocks, fixed submaps).
   blocks="$data/${scenario}_blocks_S$block_size"
   submaps="$data/${scenario}_submaps_L$block_size"
   [[ -f "$blocks/index.yaml" ]] || "${gpm[@]}" blocks "$blocks" --map "$scn/global_map.pcd" \
-    --trajectory "$scn/ground_truth.tum" --size "$block_size" --voxel 0 --overwrite
-  [[ -f "$submaps/index.yaml" ]] || "${gpm[@]}" submaps "$scn/global_map.pcd" "$submaps" --side "$block_size" --overwrite
+    --trajectory "$scn/ground_truth.tum" --size "$block_size" --voxel 0 --force
+  [[ -f "$submaps/index.yaml" ]] || "${gpm[@]}" submaps "$scn/global_map.pcd" "$submaps" --side "$block_size" --force
   "${gpm[@]}" storage "$scn/global_map.pcd" --tiles "$data/${scenario}_tiles_s2" --blocks "$blocks" \
     --submaps "$submaps" >"$out/storage.md.tmp"
   mv "$out/storage.md.tmp" "$out/storage.md"

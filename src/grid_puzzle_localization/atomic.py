@@ -1,15 +1,20 @@
 """Atomic writes: a temporary file (or directory) beside the destination, then os.replace, so a
-reader never sees a half-written file and a failure or interrupt leaves the old content in place."""
+reader never sees a half-written file and a failure or interrupt leaves the old content in place.
+
+Output directories of the gpm commands follow one rule (:func:`check_output_dir`): an existing
+non-empty directory is replaced only with ``--force``, at commit time."""
 
 from __future__ import annotations
 
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO
+
+from grid_puzzle_localization.errors import UserError
 
 # mkstemp creates files readable by the owner only; written files get the usual umask-based mode.
 _UMASK = os.umask(0)
@@ -58,3 +63,19 @@ def atomic_directory(target: str | os.PathLike) -> Iterator[Path]:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def check_output_dir(out_dir: str | os.PathLike, force: bool, inputs: Sequence[str | os.PathLike] = ()) -> None:
+    """Raises UserError when ``out_dir`` cannot be (re)placed by :func:`atomic_directory`: it is a file,
+    a non-empty directory without ``force``, holds one of ``inputs``, or its parent does not exist."""
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise UserError(f"{out_dir}: exists and is not a directory; choose another output directory")
+    if out_dir.is_dir() and any(out_dir.iterdir()) and not force:
+        raise UserError(f"{out_dir}: output directory is not empty; choose another one or pass --force to replace it")
+    resolved = out_dir.resolve()
+    for path in inputs:
+        if resolved in Path(path).resolve().parents:
+            raise UserError(f"{path}: input lies inside the output directory {out_dir}, which would be replaced")
+    if not out_dir.resolve().parent.is_dir():
+        raise UserError(f"{out_dir}: parent directory does not exist; create it first")

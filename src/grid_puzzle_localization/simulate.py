@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from grid_puzzle_localization.malloc_tuning import reuse_large_buffers
 from grid_puzzle_localization.sim.scenario import ScenarioConfig, generate
 from grid_puzzle_localization.sim.sensors import SENSORS
 from grid_puzzle_localization.sim.worlds import WORLDS
@@ -11,7 +12,9 @@ from grid_puzzle_localization.sim.worlds import WORLDS
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scenario", help=f"world to simulate: {', '.join(WORLDS)}")
-    parser.add_argument("-o", "--output", help="output directory (default: ./<scenario>); must not exist")
+    parser.add_argument(
+        "-o", "--output", help="output directory (default: ./<scenario>); must be absent or empty unless --force"
+    )
     parser.add_argument(
         "--sensor", help=f"LiDAR model: {', '.join(SENSORS)} (default: livox for courtyard, hdl32 for urban)"
     )
@@ -31,12 +34,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=int,
         help="moving pedestrians/cars in the scans, not in the map (default 12 x scale / 20 x scale in urban)",
     )
-    parser.add_argument("--threads", type=int, default=2, help="ray-casting threads (default 2)")
-    parser.add_argument("--overwrite", action="store_true", help="replace an existing output directory")
+    parser.add_argument(
+        "--threads", type=int, default=2, help="sweep worker threads (default 2; same output for any count)"
+    )
+    parser.add_argument("--force", action="store_true", help="replace a non-empty output directory")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
 def run(args: argparse.Namespace) -> int:
+    reuse_large_buffers()  # per-sweep numpy temporaries of several MB: no page faults on each reuse
     cfg = ScenarioConfig(
         world=args.scenario,
         sensor=args.sensor,
@@ -48,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         threads=args.threads,
         movers=args.movers,
     )
-    summary = generate(cfg, args.output or args.scenario, overwrite=args.overwrite, progress=not args.quiet)
+    summary = generate(cfg, args.output or args.scenario, force=args.force, progress=not args.quiet)
     print(
         f"{summary.directory}: {summary.duration:.1f} s, {summary.sweeps} sweeps, {summary.points} points; "
         f"prior map {summary.map_points} points from {summary.map_sweeps} sweeps"

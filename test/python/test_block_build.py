@@ -145,14 +145,14 @@ def test_map_input_cuts_the_same_keyframes(keyframe_set, tmp_path):
     np.testing.assert_allclose(a.centroids(), b.centroids(), atol=1e-6)
 
 
-def test_existing_output_needs_overwrite(keyframe_set, tmp_path, capsys):
+def test_existing_output_needs_force(keyframe_set, tmp_path, capsys):
     scans, poses = keyframe_set
     out = tmp_path / "blocks"
     out.mkdir()
     (out / "old.txt").write_text("old")
     assert run_blocks(scans, poses, out) == 2
-    assert "--overwrite" in capsys.readouterr().err
-    assert run_blocks(scans, poses, out, "--overwrite") == 0
+    assert "--force" in capsys.readouterr().err
+    assert run_blocks(scans, poses, out, "--force") == 0
     assert not (out / "old.txt").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["blocks", "poses.tum", "scans"]  # no temporaries left
 

@@ -102,6 +102,6 @@ def test_failed_write_keeps_the_old_directory(block_dir, tmp_path):
         raise RuntimeError("disk full")
 
     with pytest.raises(RuntimeError):
-        write_block_dir(index.directory, blocks(), "keyframe_blocks", {}, 0, overwrite=True)
+        write_block_dir(index.directory, blocks(), "keyframe_blocks", {}, 0, force=True)
     assert sorted(p.name for p in index.directory.iterdir()) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["b"]  # no temporaries left

@@ -266,3 +266,21 @@ def test_interpolated_reference_removes_the_stamp_offset():
     late = turning(np.array([t_gt[-1] + 0.002]))
     with pytest.raises(UserError, match="same clock"):
         interpolated_errors(gt, late, 0.005)
+
+
+def test_tum_nanosecond_stamps_are_written_digit_for_digit(tmp_path):
+    stamps_ns = 1_700_000_000_000_000_000 + np.array([0, 5_000_001, 10_000_002, 999_999_999])
+    traj = make_trajectory(stamps_ns * 1e-9, RNG.normal(0, 100, (4, 3)), Rotation.random(4, random_state=4).as_quat())
+    write_tum(tmp_path / "ns.tum", traj, stamps_ns)
+    lines = (tmp_path / "ns.tum").read_text().splitlines()[1:]
+    assert [line.split()[0] for line in lines] == [
+        "1700000000.000000000",
+        "1700000000.005000001",
+        "1700000000.010000002",
+        "1700000000.999999999",
+    ]
+    back = read_tum(tmp_path / "ns.tum")
+    np.testing.assert_allclose(back.xyz, traj.xyz, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(back.quat, traj.quat, rtol=0, atol=1e-9)
+    with pytest.raises(ValueError, match="nanoseconds"):
+        write_tum(tmp_path / "bad.tum", traj, stamps_ns + 10**6)

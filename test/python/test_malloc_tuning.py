@@ -27,3 +27,34 @@ for _ in range(3):  # without the pin, glibc would raise its threshold after the
 def test_freed_large_buffers_go_back_to_the_os():
     result = subprocess.run([sys.executable, "-c", PROGRAM], capture_output=True, text=True, check=False)
     assert result.returncode == 0, result.stderr
+
+
+REUSE_PROGRAM = """
+import resource
+import sys
+import numpy as np
+from grid_puzzle_localization.malloc_tuning import reuse_large_buffers
+
+if sys.argv[1] == "tuned":
+    assert reuse_large_buffers()
+faults = []
+for _ in range(5):  # three 8 MiB temporaries at a time, as a sweep's numpy maths makes them
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    buffers = [np.ones(8 * 2**20, dtype=np.uint8) for _ in range(3)]
+    del buffers
+    faults.append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
+print(max(faults[1:]))
+"""
+
+
+def _faults_after_warm_up(mode: str) -> int:
+    result = subprocess.run([sys.executable, "-c", REUSE_PROGRAM, mode], capture_output=True, text=True, check=False)
+    assert result.returncode == 0, result.stderr
+    return int(result.stdout)
+
+
+def test_reused_large_buffers_do_not_fault_pages_in_again():
+    # glibc's default trims the freed 24 MiB and faults it in again on the next round (about 1000 faults
+    # of 4 KiB pages per round).
+    assert _faults_after_warm_up("tuned") < 64
+    assert _faults_after_warm_up("default") > 4 * 64

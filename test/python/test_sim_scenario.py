@@ -2,6 +2,7 @@
 
 import filecmp
 import itertools
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -35,6 +36,14 @@ def test_same_seed_gives_byte_identical_files(tiny, tmp_path):
         assert filecmp.cmp(tiny / "a" / name, tiny / "b" / name, shallow=False), name
     a, b = worlds.make_world("courtyard", 7, 0.25).mesh, worlds.make_world("courtyard", 8, 0.25).mesh
     assert a.vertices.shape != b.vertices.shape or not np.array_equal(a.vertices, b.vertices)
+
+
+def test_thread_count_does_not_change_the_output(tiny, tmp_path):
+    generate(replace(TINY, threads=1), tmp_path / "one", progress=False)
+    generate(replace(TINY, threads=3), tmp_path / "three", progress=False)
+    for name in FILES:
+        assert filecmp.cmp(tiny / "a" / name, tmp_path / "one" / name, shallow=False), name
+        assert filecmp.cmp(tiny / "a" / name, tmp_path / "three" / name, shallow=False), name
 
 
 def test_movers_are_in_the_scans_but_not_in_the_map(tiny, tmp_path):
@@ -204,7 +213,8 @@ def test_bad_parameters_are_clear_errors(argv, needle, tmp_path, capsys):
 
 def test_existing_output_is_refused_and_interrupt_leaves_nothing(tmp_path, monkeypatch):
     (tmp_path / "taken").mkdir()
-    with pytest.raises(UserError, match="already exists"):
+    (tmp_path / "taken" / "old.txt").write_text("old")
+    with pytest.raises(UserError, match="not empty; choose another one or pass --force"):
         generate(TINY, tmp_path / "taken", progress=False)
 
     def interrupted(*args, **kwargs):
@@ -214,3 +224,4 @@ def test_existing_output_is_refused_and_interrupt_leaves_nothing(tmp_path, monke
     with pytest.raises(KeyboardInterrupt):
         generate(TINY, tmp_path / "out", progress=False)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["taken"]
+    assert [p.name for p in (tmp_path / "taken").iterdir()] == ["old.txt"]

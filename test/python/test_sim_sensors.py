@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from grid_puzzle_localization.sim import meshes
+from grid_puzzle_localization.sim import lidar, meshes, worlds
 from grid_puzzle_localization.sim.lidar import Mount, SweepSimulator
 from grid_puzzle_localization.sim.meshes import MeshBuilder
+from grid_puzzle_localization.sim.movers import make_movers
 from grid_puzzle_localization.sim.raycast import RayCaster
 from grid_puzzle_localization.sim.sensors import SENSORS, SpinningLidar
 from grid_puzzle_localization.sim.trajectory import RATE, Trajectory
@@ -159,3 +160,58 @@ def test_movers_occlude_the_static_world():
     np.testing.assert_allclose(ahead["x"], 5.0, atol=1e-4)
     assert np.all(without["x"][np.abs(without["y"] / without["x"]) < 0.9 / 5.0] > 19.9)
     assert len(pts) == len(without)  # rays that hit the wall hit the mover instead: no return gained or lost
+
+
+def test_mover_cull_keeps_every_ray_that_hits_a_mover():
+    """The azimuth cull against brute force (every ray cast against the movers) for a moving, turning
+    sensor among boxes at many bearings and distances, including one close enough to disable the cull."""
+    rng = np.random.default_rng(5)
+    sensor = SENSORS["hdl32"]
+    sweep = sensor.sweep(0)
+    t = np.arange(int(2.0 * RATE) + 1) / RATE
+    yaw = 0.8 * t  # turning at 0.8 rad/s while driving at 8 m/s
+    pos = np.column_stack([8.0 * t, np.zeros_like(t), np.zeros_like(t)])
+    traj = Trajectory(pos, Rotation.from_euler("z", yaw).as_quat(), np.array([0, 1]))
+    floor = _box_world(-200.0, -200.0, 200.0, 200.0, -10.0, -1.5)
+    for near in (False, True):
+        b = MeshBuilder()
+        for _ in range(15):
+            r, bearing = rng.uniform(4.0, 60.0), rng.uniform(-np.pi, np.pi)
+            x, y = 4.0 + r * np.cos(bearing), r * np.sin(bearing)
+            b.add(meshes.box(x - 2.2, y - 0.9, x + 2.2, y + 0.9, -1.5, 0.0, rng.uniform(0, np.pi)), 0.5)
+        if near:
+            b.add(meshes.box(4.2, 0.3, 4.6, 0.7, -1.5, 0.5), 0.5)  # a post within 0.7 m of the sensor path
+        movers = b.build()
+        with RayCaster(floor) as caster, RayCaster(movers, threads=1) as brute:
+            sim = SweepSimulator(floor, caster, sensor, Mount(np.array([0.0, 0.0, 1.8]), np.eye(3)))
+            origin, direction = sim.rays(traj, 0.5 + sweep.dt, sweep.directions)
+            _, prim = brute.cast(origin, direction)
+        hits = np.flatnonzero(prim >= 0)
+        candidates = lidar._may_hit(origin, direction, movers)
+        assert len(hits) > 1000 and np.all(np.isin(hits, candidates))
+        if near:
+            assert len(candidates) == len(origin)
+        else:
+            assert len(candidates) < 0.7 * len(origin)
+
+
+def test_mover_mesh_is_the_mover_shape_at_its_interpolated_pose():
+    """Movers.mesh_at against building the shapes directly at the pose interpolate() gives."""
+    world = worlds.make_world("urban", 2, 0.3)
+    movers = make_movers(world, 0.3, 30.0, 4, np.random.default_rng(2))
+    mesh = movers.mesh_at(12.34, np.array([1e6, 1e6]))  # sensor far away: every mover present
+    b = MeshBuilder()
+    for traj, kind, refl in zip(movers.trajectories, movers.kinds, movers.reflectivity, strict=True):
+        p, q = traj.interpolate(np.array([12.34]))
+        x, y = p[0, :2]
+        heading = Rotation.from_quat(q[0]).as_euler("ZYX")[0]
+        if kind == "car":
+            worlds.car(b, world.ground, x, y, heading, refl)
+        else:
+            z = float(world.ground.height(np.array(x), np.array(y)))
+            b.add(meshes.box(x - 0.15, y - 0.25, x + 0.15, y + 0.25, z, z + 1.75, heading), refl)
+    expected = b.build()
+    np.testing.assert_allclose(mesh.triangles, expected.triangles, atol=2e-3)
+    np.testing.assert_array_equal(mesh.reflectivity, expected.reflectivity)
+    near = movers.trajectories[0].interpolate(np.array([12.34]))[0][0, :2]
+    assert len(movers.mesh_at(12.34, near).faces) < len(mesh.faces)  # the one at the sensor is left out

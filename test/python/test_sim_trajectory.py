@@ -13,6 +13,7 @@ from grid_puzzle_localization.sim.trajectory import (
     Trajectory,
     localization_trajectory,
     mapping_trajectory,
+    transform,
 )
 
 SECTORS = [(-20, 20), (20, 70), (70, 110), (110, 160), (160, 200), (200, 250), (250, 290), (290, 340)]
@@ -117,3 +118,20 @@ def test_worlds_and_routes_build_for_many_seeds_and_scales(name):
             if scale <= 0.3:
                 traj = localization_trajectory(world, scale, _rng(seed, 1))
                 assert traj.length() == pytest.approx(PROFILES[name].length * scale, rel=0.02)
+
+
+def test_frames_are_the_interpolated_poses_as_rotation_matrices():
+    """frames() (component-major, float32 rotations) against interpolate() and scipy's quaternion maths."""
+    world = worlds.make_world("courtyard", 1, 0.3)
+    traj = localization_trajectory(world, 0.3, _rng(1, 1))
+    t = np.random.default_rng(0).uniform(-1.0, traj.duration + 1.0, 3000)  # clamped outside the run
+    pos, rot = traj.frames(t)
+    p, q = traj.interpolate(t)
+    np.testing.assert_allclose(pos.T, p, atol=1e-9)
+    np.testing.assert_allclose(np.moveaxis(rot, 2, 0), Rotation.from_quat(q).as_matrix(), atol=2e-6)
+    v = np.random.default_rng(1).normal(size=(3, len(t)))
+    expected = Rotation.from_quat(q).apply(v.T) + p
+    np.testing.assert_allclose(transform(rot, v, pos).T, expected, atol=1e-5)
+    out = np.empty((len(t), 3), dtype=np.float32)
+    assert transform(rot, np.array([0.2, 0.0, 1.3]), pos, out) is out
+    np.testing.assert_allclose(out, Rotation.from_quat(q).apply([0.2, 0.0, 1.3]) + p, atol=1e-4)

@@ -58,7 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--voxel", type=float, default=defaults.voxel, help="downsample voxel [m], 0 for none (default: %(default)s)"
     )
-    parser.add_argument("--overwrite", action="store_true", help="replace the output directory if it exists")
+    parser.add_argument("--force", action="store_true", help="replace a non-empty output directory")
 
 
 def _scans(args: argparse.Namespace, config: BlockConfig) -> tuple[Iterable[Scan], PointSets, dict]:
@@ -122,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
         KIND,
         params,
         map_points,
-        overwrite=args.overwrite,
+        force=args.force,
     )
     stored = sum(b.points for b in index.blocks)
     skipped = getattr(scans, "skipped", 0)

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from grid_puzzle_localization.atomic import atomic_directory
+from grid_puzzle_localization.atomic import atomic_directory, check_output_dir
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array
 
@@ -75,15 +75,12 @@ def write_block_dir(
     kind: str,
     params: dict[str, Any],
     map_points: int,
-    overwrite: bool = False,
+    force: bool = False,
 ) -> BlockIndex:
     """Writes blocks ``(points (N, 3) [m], centroid (3,) [m], extra index keys)`` in the given order as
     ``block_0000.pcd`` ... with their index; blocks are consumed one at a time."""
     target = Path(target)
-    if target.exists() and not overwrite:
-        raise UserError(f"output directory {target} exists; remove it or pass --overwrite")
-    if not target.absolute().parent.is_dir():
-        raise UserError(f"cannot write {target}: its parent directory does not exist; create it first")
+    check_output_dir(target, force)
     entries: list[BlockEntry] = []
     with atomic_directory(target) as tmp:
         for number, (points, centroid, extra) in enumerate(blocks):

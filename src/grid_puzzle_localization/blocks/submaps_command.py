@@ -25,10 +25,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=defaults.overlap,
         help="overlap ratio o in [0, 1); squares are L (1 - o) apart (default: %(default)s)",
     )
-    parser.add_argument("--overwrite", action="store_true", help="replace the output directory if it exists")
+    parser.add_argument("--force", action="store_true", help="replace a non-empty output directory")
 
 
-def write_submaps(points: np.ndarray, config: SubmapConfig, output, map_path, overwrite: bool) -> BlockIndex:
+def write_submaps(points: np.ndarray, config: SubmapConfig, output, map_path, force: bool) -> BlockIndex:
     """Cuts ``points`` (the map at ``map_path``) into submaps and writes them as a block directory."""
     stride = config.stride
     return write_block_dir(
@@ -40,14 +40,14 @@ def write_submaps(points: np.ndarray, config: SubmapConfig, output, map_path, ov
         KIND,
         {"side": config.side, "overlap": config.overlap, "stride": stride, "map": str(map_path)},
         len(points),
-        overwrite=overwrite,
+        force=force,
     )
 
 
 def run(args: argparse.Namespace) -> int:
     config = SubmapConfig(args.side, args.overlap).checked()
     points = xyz_array(read_pcd(args.map).points)
-    index = write_submaps(points, config, args.output, args.map, args.overwrite)
+    index = write_submaps(points, config, args.output, args.map, args.force)
     stored = sum(b.points for b in index.blocks)
     total = sum(b.bytes for b in index.blocks)
     files = len(index.blocks)

@@ -5,6 +5,7 @@ last), separated by spaces; lines starting with ``#`` are comments."""
 
 from __future__ import annotations
 
+import io
 import os
 from dataclasses import dataclass
 
@@ -80,9 +81,21 @@ def read_tum(path: str | os.PathLike) -> Trajectory:
     return _checked(data[:, 0], data[:, 1:4], data[:, 4:8], str(path))
 
 
-def write_tum(path: str | os.PathLike, traj: Trajectory) -> None:
-    """Writes ``traj`` as TUM (nanosecond times, nanometre positions), atomically."""
-    data = np.hstack([traj.t[:, None], traj.xyz, traj.quat])
+def write_tum(path: str | os.PathLike, traj: Trajectory, stamps_ns: np.ndarray | None = None) -> None:
+    """Writes ``traj`` as TUM (9 decimals: nanosecond times, nanometre positions), atomically.
+
+    float64 seconds resolve only about 0.2 us at epoch times (1.7e9 s); pass the same times as integer
+    nanoseconds in ``stamps_ns`` to have them written digit for digit."""
     with atomic_write(path) as f:
         f.write("# timestamp tx ty tz qx qy qz qw\n")
-        np.savetxt(f, data, fmt="%.9f")
+        if stamps_ns is None:
+            np.savetxt(f, np.hstack([traj.t[:, None], traj.xyz, traj.quat]), fmt="%.9f")
+            return
+        stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
+        if stamps_ns.shape != traj.t.shape or np.any(np.abs(stamps_ns * 1e-9 - traj.t) > 1e-6):
+            raise ValueError("stamps_ns must hold the trajectory's times in nanoseconds")
+        poses = io.StringIO()
+        np.savetxt(poses, np.hstack([traj.xyz, traj.quat]), fmt="%.9f")
+        secs, nsecs = np.divmod(stamps_ns, 10**9)
+        lines = poses.getvalue().splitlines()
+        f.writelines(f"{s}.{n:09d} {pose}\n" for s, n, pose in zip(secs.tolist(), nsecs.tolist(), lines, strict=True))

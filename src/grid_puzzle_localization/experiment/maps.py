@@ -75,7 +75,7 @@ def ensure_blocks(global_map: Path, ground_truth: Path, block_dir: Path, block_s
     scans = map_scans(points, read_tum(ground_truth), DEFAULT_SCAN_RADIUS)
     builder = build_blocks(scans, config, sets=MapSubsets(points))
     extras = ((b.points, b.centroid, {"keyframes": b.keyframes}) for b in builder.blocks)
-    write_block_dir(block_dir, extras, "keyframe_blocks", params, builder.map_points(), overwrite=True)
+    write_block_dir(block_dir, extras, "keyframe_blocks", params, builder.map_points(), force=True)
     return block_dir
 
 
@@ -90,5 +90,5 @@ def ensure_submaps(global_map: Path, submap_dir: Path, side_m: float) -> Path:
     params = {"side": config.side, "overlap": config.overlap, "map": str(global_map)}
     if _fresh(submap_dir, [global_map], params):
         return submap_dir
-    write_submaps(xyz_array(read_pcd(global_map).points), config, submap_dir, global_map, overwrite=True)
+    write_submaps(xyz_array(read_pcd(global_map).points), config, submap_dir, global_map, force=True)
     return submap_dir

@@ -9,6 +9,8 @@ same inputs give the same bytes. Messages must be written in non-decreasing reco
 
 from __future__ import annotations
 
+import io
+import struct
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,17 +18,10 @@ import rosbag
 import rospy
 from geometry_msgs.msg import TransformStamped
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import Imu, PointCloud2, PointField
+from sensor_msgs.msg import Imu, PointCloud2
 from tf2_msgs.msg import TFMessage
 
-_NUMPY_TO_POINTFIELD = {
-    np.dtype("<f4"): PointField.FLOAT32,
-    np.dtype("<f8"): PointField.FLOAT64,
-    np.dtype("<u2"): PointField.UINT16,
-    np.dtype("<u1"): PointField.UINT8,
-    np.dtype("<i4"): PointField.INT32,
-    np.dtype("<u4"): PointField.UINT32,
-}
+from grid_puzzle_localization.ros.cloud_msg import fields_of
 
 
 @dataclass(frozen=True)
@@ -46,25 +41,71 @@ def _stamp(t: float) -> rospy.Time:
     return rospy.Time(nsecs=round(t * 1e9))
 
 
-def _point_fields(dtype: np.dtype) -> list[PointField]:
-    return [
-        PointField(name=name, offset=off, datatype=_NUMPY_TO_POINTFIELD[dt], count=1)
-        for name, (dt, off) in dtype.fields.items()
-    ]
+def _header_fields(frame: str) -> list[tuple]:
+    """Serialized std_msgs/Header (seq, stamp, frame_id) as packed numpy fields."""
+    return [("seq", "<u4"), ("secs", "<u4"), ("nsecs", "<u4"), *_string_fields(frame, "frame")]
+
+
+def _string_fields(text: str, name: str) -> list[tuple]:
+    n = len(text.encode())
+    return [(f"{name}_len", "<u4")] + ([(name, f"S{n}")] if n else [])
+
+
+# sensor_msgs/Imu and nav_msgs/Odometry after their header(s), as genpy serializes them (packed, little-endian).
+_IMU_BODY = [
+    ("orientation", "<f8", 4),
+    ("orientation_covariance", "<f8", 9),
+    ("angular_velocity", "<f8", 3),
+    ("angular_velocity_covariance", "<f8", 9),
+    ("linear_acceleration", "<f8", 3),
+    ("linear_acceleration_covariance", "<f8", 9),
+]
+_ODOMETRY_BODY = [
+    ("position", "<f8", 3),
+    ("orientation", "<f8", 4),
+    ("pose_covariance", "<f8", 36),
+    ("linear", "<f8", 3),
+    ("angular", "<f8", 3),
+    ("twist_covariance", "<f8", 36),
+]
+
+
+def _records(dtype: np.dtype, stamps_ns: np.ndarray, strings: dict[str, str]) -> np.ndarray:
+    """Zeroed serialized messages of ``dtype`` with header stamps and the string fields filled in."""
+    rec = np.zeros(len(stamps_ns), dtype=dtype)
+    rec["secs"], rec["nsecs"] = np.divmod(np.asarray(stamps_ns, dtype=np.int64), 10**9)
+    for name, text in strings.items():
+        rec[f"{name}_len"] = len(text.encode())
+        if text:
+            rec[name] = text.encode()
+    return rec
 
 
 class ScenarioBag:
-    """Context manager around a rosbag.Bag opened for writing (uncompressed, fixed chunk threshold)."""
+    """Context manager around a rosbag.Bag opened for writing (uncompressed, fixed chunk threshold).
+
+    Messages are serialized here, many at a time with numpy for the IMU and ground truth, and handed to
+    rosbag pre-serialized (``raw``); the bytes equal genpy's serialization of the same message."""
 
     def __init__(self, path: str, names: BagNames) -> None:
         self._bag = rosbag.Bag(path, "w", chunk_threshold=4 * 1024 * 1024)
         self.names = names
+        self._imu_dtype = np.dtype(_header_fields(names.base_frame) + _IMU_BODY)
+        self._odometry_dtype = np.dtype(
+            _header_fields(names.map_frame) + _string_fields(names.base_frame, "child") + _ODOMETRY_BODY
+        )
 
     def __enter__(self) -> ScenarioBag:
         return self
 
     def __exit__(self, *exc) -> None:
         self._bag.close()
+
+    def _write_raw(self, topic: str, msg_class, records: np.ndarray, stamps_ns: np.ndarray) -> None:
+        data, size = records.tobytes(), records.dtype.itemsize
+        for j, ns in enumerate(stamps_ns.tolist()):
+            raw = (msg_class._type, data[j * size : (j + 1) * size], msg_class._md5sum, msg_class)
+            self._bag.write(topic, raw, rospy.Time(nsecs=ns), raw=True)
 
     def write_tf_static(self, t: float, translation: np.ndarray, quat_xyzw: np.ndarray) -> None:
         """The base_link -> lidar mount, latched like a static_transform_publisher."""
@@ -86,42 +127,48 @@ class ScenarioBag:
         }
         self._bag.write("/tf_static", msg, _stamp(t), connection_header=header)
 
-    def write_points(self, stamp: float, record_time: float, points: np.ndarray) -> None:
-        """A sweep (structured array, lidar frame) stamped at its start, recorded at ``record_time``."""
+    def write_points(self, stamp_ns: int, record_ns: int, points: np.ndarray) -> None:
+        """A sweep (structured array, lidar frame) stamped at its start, recorded at ``record_ns``. genpy
+        serializes the message without its data; the points' bytes are spliced in with one copy."""
         msg = PointCloud2()
-        msg.header.stamp = _stamp(stamp)
+        msg.header.stamp = rospy.Time(nsecs=stamp_ns)
         msg.header.frame_id = self.names.lidar_frame
         msg.height, msg.width = 1, len(points)
-        msg.fields = _point_fields(points.dtype)
+        msg.fields = fields_of(points.dtype)
         msg.is_bigendian = False
         msg.point_step = points.dtype.itemsize
         msg.row_step = msg.point_step * len(points)
         msg.is_dense = True
-        msg.data = np.ascontiguousarray(points).tobytes()
-        self._bag.write(self.names.points_topic, msg, _stamp(record_time))
+        buffer = io.BytesIO()
+        msg.serialize(buffer)
+        empty = buffer.getvalue()  # ... uint32 data length (0), is_dense (1 byte)
+        data = np.ascontiguousarray(points)
+        serialized = b"".join([empty[:-5], struct.pack("<I", data.nbytes), memoryview(data).cast("B"), empty[-1:]])
+        raw = (PointCloud2._type, serialized, PointCloud2._md5sum, PointCloud2)
+        self._bag.write(self.names.points_topic, raw, rospy.Time(nsecs=record_ns), raw=True)
 
-    def write_imu(self, t: float, gyro: np.ndarray, accel: np.ndarray, gyro_var: float, accel_var: float) -> None:
-        msg = Imu()
-        msg.header.stamp = _stamp(t)
-        msg.header.frame_id = self.names.base_frame
-        msg.orientation_covariance[0] = -1.0  # no orientation estimate
-        msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z = map(float, gyro)
-        msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z = map(float, accel)
-        msg.angular_velocity_covariance = [gyro_var, 0.0, 0.0, 0.0, gyro_var, 0.0, 0.0, 0.0, gyro_var]
-        msg.linear_acceleration_covariance = [accel_var, 0.0, 0.0, 0.0, accel_var, 0.0, 0.0, 0.0, accel_var]
-        self._bag.write(self.names.imu_topic, msg, msg.header.stamp)
+    def write_imu(
+        self, stamps_ns: np.ndarray, gyro: np.ndarray, accel: np.ndarray, gyro_var: float, accel_var: float
+    ) -> None:
+        """IMU samples (k,) stamps [ns], (k, 3) angular velocity [rad/s] and acceleration [m/s^2], with
+        diagonal covariances; no orientation (orientation_covariance[0] = -1)."""
+        rec = _records(self._imu_dtype, stamps_ns, {"frame": self.names.base_frame})
+        rec["orientation_covariance"][:, 0] = -1.0
+        rec["angular_velocity"], rec["linear_acceleration"] = gyro, accel
+        rec["angular_velocity_covariance"][:, ::4] = gyro_var
+        rec["linear_acceleration_covariance"][:, ::4] = accel_var
+        self._write_raw(self.names.imu_topic, Imu, rec, stamps_ns)
 
     def write_ground_truth(
-        self, t: float, position: np.ndarray, quat_xyzw: np.ndarray, velocity_body: np.ndarray, gyro_body: np.ndarray
+        self,
+        stamps_ns: np.ndarray,
+        position: np.ndarray,
+        quat_xyzw: np.ndarray,
+        velocity_body: np.ndarray,
+        gyro_body: np.ndarray,
     ) -> None:
-        msg = Odometry()
-        msg.header.stamp = _stamp(t)
-        msg.header.frame_id = self.names.map_frame
-        msg.child_frame_id = self.names.base_frame
-        p, q = msg.pose.pose.position, msg.pose.pose.orientation
-        p.x, p.y, p.z = map(float, position)
-        q.x, q.y, q.z, q.w = map(float, quat_xyzw)
-        v, w = msg.twist.twist.linear, msg.twist.twist.angular
-        v.x, v.y, v.z = map(float, velocity_body)
-        w.x, w.y, w.z = map(float, gyro_body)
-        self._bag.write(self.names.ground_truth_topic, msg, msg.header.stamp)
+        """Poses of base_link in map (k, 3) [m] and (k, 4), twist in base_link (k, 3) [m/s] and [rad/s]."""
+        rec = _records(self._odometry_dtype, stamps_ns, {"frame": self.names.map_frame, "child": self.names.base_frame})
+        rec["position"], rec["orientation"] = position, quat_xyzw
+        rec["linear"], rec["angular"] = velocity_body, gyro_body
+        self._write_raw(self.names.ground_truth_topic, Odometry, rec, stamps_ns)

@@ -23,7 +23,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from grid_puzzle_localization.sim.lidar import Mount
-from grid_puzzle_localization.sim.trajectory import RATE, Trajectory, rotate
+from grid_puzzle_localization.sim.trajectory import RATE, Trajectory, transform
 
 MAP_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4")])
 _OFFSET = 1 << 20  # voxel indices are stored biased by this, 21 bits per axis
@@ -81,9 +81,9 @@ def drifted(truth: Trajectory, bounds: DriftBounds, rng: np.random.Generator) ->
 def to_map(estimate: Trajectory, mount: Mount, t_start: float, points: np.ndarray) -> np.ndarray:
     """Map-frame positions (n, 3) of lidar-frame ``points`` (fields x y z time) placed at the estimated
     pose of each point's time (a deskewed SLAM scan)."""
-    p, q = estimate.interpolate(t_start + points["time"].astype(np.float64))
-    local = np.stack([points["x"], points["y"], points["z"]], axis=1).astype(np.float64)
-    return p + rotate(q, mount.translation + local @ mount.rotation.T)
+    pos, rot = estimate.frames(t_start + points["time"].astype(np.float64))
+    local = np.stack([points["x"], points["y"], points["z"]]).astype(np.float64)
+    return transform(rot, mount.rotation @ local + mount.translation[:, None], pos).T
 
 
 class VoxelMap:

@@ -9,12 +9,13 @@ meshed; movers within ``CLEARANCE`` of the sensor are left out so the sensor is 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
 from grid_puzzle_localization.sim import meshes
 from grid_puzzle_localization.sim.meshes import Mesh, MeshBuilder
-from grid_puzzle_localization.sim.trajectory import MotionProfile, Trajectory, make_trajectory, plan_route
+from grid_puzzle_localization.sim.trajectory import RATE, MotionProfile, Trajectory, make_trajectory, plan_route
 from grid_puzzle_localization.sim.worlds import Ground, World, car
 
 PEDESTRIAN = MotionProfile(0.0, 1.2, 1.0, -0.8, 0.8, 1.0, 0.6, 0.1, (1.0, 5.0), 0.0, 0.1, 0.25)
@@ -23,6 +24,18 @@ CAR = MotionProfile(0.0, 6.0, 9.0, 2.5, 1.5, 2.5, 2.0, 0.3, (3.0, 10.0), 8.0, 0.
 PEDESTRIAN_LANE = {"courtyard": -0.8, "urban": -6.0}  # [m] right of the centre line
 CLEARANCE = {"pedestrian": 1.0, "car": 4.0}  # [m] horizontal, from the sensor
 DEFAULT_COUNT = {"courtyard": {"pedestrian": 12}, "urban": {"car": 12, "pedestrian": 8}}  # at scale 1
+
+
+def _templates() -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Vertices (float64, centred on the origin, heading +x, standing on z = 0) and faces of each kind."""
+    flat = Ground(0.0, 0.0, 0.0, 1.0, 0.0, 0.0)
+    shapes = {"car": MeshBuilder(), "pedestrian": MeshBuilder()}
+    car(shapes["car"], flat, 0.0, 0.0, 0.0, 0.0)
+    shapes["pedestrian"].add(meshes.box(-0.15, -0.25, 0.15, 0.25, 0.0, 1.75), 0.0)
+    return {kind: (b.build().vertices.astype(np.float64), b.build().faces) for kind, b in shapes.items()}
+
+
+_TEMPLATES = _templates()
 
 
 @dataclass(frozen=True)
@@ -34,24 +47,37 @@ class Movers:
     kinds: list[str]
     reflectivity: np.ndarray
 
+    @cached_property
+    def _yaw(self) -> list[np.ndarray]:
+        """Unwrapped heading of each mover at its trajectory samples [rad]."""
+        return [np.unwrap(traj.yaw()) for traj in self.trajectories]
+
     def mesh_at(self, t: float, sensor_xy: np.ndarray) -> Mesh | None:
         """The movers at time ``t`` [s] as one mesh, without those near ``sensor_xy``; None if none remain."""
-        b = MeshBuilder()
+        vertices, faces, reflectivity = [], [], []
         count = 0
-        for traj, kind, refl in zip(self.trajectories, self.kinds, self.reflectivity, strict=True):
-            pos, quat = traj.interpolate(np.array([t]))
-            x, y = float(pos[0, 0]), float(pos[0, 1])
+        for traj, yaw, kind, refl in zip(self.trajectories, self._yaw, self.kinds, self.reflectivity, strict=True):
+            f = min(max(t * RATE, 0.0), len(yaw) - 1.0)
+            i = min(int(f), len(yaw) - 2)
+            w = f - i
+            x, y = traj.position[i, :2] * (1 - w) + traj.position[i + 1, :2] * w
             if np.hypot(x - sensor_xy[0], y - sensor_xy[1]) < CLEARANCE[kind]:
                 continue
-            qx, qy, qz, qw = quat[0]
-            yaw = float(np.arctan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz)))
-            if kind == "car":
-                car(b, self.ground, x, y, yaw, float(refl))
-            else:
-                z = float(self.ground.height(np.array(x), np.array(y)))
-                b.add(meshes.box(x - 0.15, y - 0.25, x + 0.15, y + 0.25, z, z + 1.75, yaw), float(refl))
-            count += 1
-        return b.build() if count else None
+            heading = yaw[i] * (1 - w) + yaw[i + 1] * w
+            c, s = np.cos(heading), np.sin(heading)
+            local, tri = _TEMPLATES[kind]
+            z = float(self.ground.height(np.array(x), np.array(y)))
+            vertices.append(local @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) + np.array([x, y, z]))
+            faces.append(tri + count)
+            reflectivity.append(np.full(len(tri), refl, dtype=np.float32))
+            count += len(local)
+        if not count:
+            return None
+        return Mesh(
+            np.concatenate(vertices).astype(np.float32),
+            np.concatenate(faces).astype(np.int32),
+            np.concatenate(reflectivity),
+        )
 
 
 def make_movers(world: World, scale: float, duration: float, count: int | None, rng: np.random.Generator) -> Movers:

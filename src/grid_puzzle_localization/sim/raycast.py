@@ -45,8 +45,8 @@ class RayCaster:
         return out["tfar"], out["primID"]
 
     def cast(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Distance along each unit ``direction`` to the first triangle [m] (inf on a miss) and the hit
-        triangle's index (-1 on a miss). ``origins`` and ``directions`` are (n, 3)."""
+        """Distance along each unit ``direction`` to the first triangle [m] (float32, inf on a miss) and
+        the hit triangle's index (int32, -1 on a miss). ``origins`` and ``directions`` are (n, 3)."""
         o = np.ascontiguousarray(origins, dtype=np.float32)
         d = np.ascontiguousarray(directions, dtype=np.float32)
         n = len(o)
@@ -59,6 +59,4 @@ class RayCaster:
             results = [j.result() for j in jobs]
             t = np.concatenate([r[0] for r in results])
             prim = np.concatenate([r[1] for r in results])
-        prim = prim.astype(np.int64)
-        t = np.where(prim >= 0, t, np.inf).astype(np.float32)
-        return t, prim
+        return np.where(prim >= 0, t, np.float32(np.inf)), prim

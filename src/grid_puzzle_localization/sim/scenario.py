@@ -14,6 +14,7 @@ import math
 import os
 import sys
 import time
+from contextlib import closing
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -22,13 +23,15 @@ import yaml
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
-from grid_puzzle_localization.atomic import atomic_directory
+from grid_puzzle_localization.atomic import atomic_directory, check_output_dir
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.evaluation import trajectory as tum
 from grid_puzzle_localization.pcd import PcdStreamWriter
 from grid_puzzle_localization.sim.imu import ImuNoise, simulate_imu, true_motion
 from grid_puzzle_localization.sim.lidar import Mount, SweepSimulator
 from grid_puzzle_localization.sim.mapping import MAP_DTYPE, DriftBounds, VoxelMap, drifted, to_map
 from grid_puzzle_localization.sim.movers import Movers, make_movers
+from grid_puzzle_localization.sim.ordered import ordered_map
 from grid_puzzle_localization.sim.raycast import RayCaster
 from grid_puzzle_localization.sim.sensors import DEFAULT_SENSOR, get_sensor
 from grid_puzzle_localization.sim.trajectory import RATE, Trajectory, localization_trajectory, mapping_trajectory
@@ -52,7 +55,7 @@ class ScenarioConfig:
     duration: float | None = None  # [s] of the localization run; None: the whole route
     map_leaf: float | None = None  # [m] voxel size of the prior map
     start_time: float = 1.7e9  # [s] bag time of the first sample
-    threads: int = 2  # ray-casting threads (the output does not depend on it)
+    threads: int = 2  # sweep worker threads (the output does not depend on it)
     movers: int | None = None  # moving pedestrians/cars in the scans (not in the map); None: world default
     drift: DriftBounds = field(default_factory=DriftBounds)
     imu_noise: ImuNoise = field(default_factory=ImuNoise)
@@ -77,7 +80,8 @@ class ScenarioConfig:
 
 @dataclass
 class Summary:
-    """What a run produced and how long each pass took (wall-clock seconds)."""
+    """What a run produced and how long each pass took: wall-clock seconds and CPU seconds of the
+    process (all threads), so figures from a shared machine can be judged."""
 
     directory: Path
     duration: float
@@ -90,21 +94,30 @@ class Summary:
     map_points: int  # points in global_map.pcd
     seconds_localization: float
     seconds_mapping: float
+    cpu_seconds_localization: float
+    cpu_seconds_mapping: float
 
 
-def _rng(seed: int, stream: int) -> np.random.Generator:
-    return np.random.default_rng([seed, stream])
+def _rng(seed: int, *stream: int) -> np.random.Generator:
+    return np.random.default_rng([seed, *stream])
 
 
 def _progress(total: int, desc: str, show: bool):
     return tqdm(total=total, desc=desc, unit="sweep", file=sys.stderr, disable=not show, mininterval=1.0)
 
 
+def _sample_stamps_ns(t0: float, samples: np.ndarray) -> np.ndarray:
+    """Exact stamps [ns] of trajectory samples (indices at RATE) of a run starting at ``t0`` [s]."""
+    return round(t0 * 1e9) + samples * round(1e9 / RATE)
+
+
 def _write_tum(path: Path, t0: float, traj: Trajectory) -> None:
+    """base_link in map at GROUND_TRUTH_RATE, stamped in exact nanoseconds like the bag."""
     step = round(RATE / GROUND_TRUTH_RATE)
-    stamps = t0 + traj.times[::step]
-    data = np.column_stack([stamps, traj.position[::step], traj.quat[::step]])
-    np.savetxt(path, data, fmt=["%.6f"] + ["%.6f"] * 3 + ["%.9f"] * 4, header="timestamp tx ty tz qx qy qz qw")
+    i = np.arange(0, len(traj.position), step)
+    stamps_ns = _sample_stamps_ns(t0, i)
+    truth = tum.make_trajectory(stamps_ns * 1e-9, traj.position[i], traj.quat[i], source="ground truth")
+    tum.write_tum(path, truth, stamps_ns)
 
 
 def _write_bag(
@@ -121,26 +134,35 @@ def _write_bag(
     gt_step = round(RATE / GROUND_TRUTH_RATE)
     samples_per_sweep = round(RATE / sensor.rate)
     n_sweeps = int(np.floor(traj.duration * sensor.rate + 1e-9))
-    rng = _rng(cfg.seed, 4)
+
+    def sweep_cloud(k: int) -> tuple[int, np.ndarray]:
+        sweep = sensor.sweep(k)
+        t_mid = (k + 0.5) / sensor.rate
+        frozen = movers.mesh_at(t_mid, traj.interpolate(np.array([t_mid]))[0][0, :2])
+        return len(sweep.dt), sim.simulate(traj, k / sensor.rate, sweep, _rng(cfg.seed, 4, k), frozen)
+
     rays = points = 0
-    with ScenarioBag(str(path), BagNames()) as bag, _progress(n_sweeps, "localization run", show) as bar:
+    clouds = ordered_map(sweep_cloud, n_sweeps, cfg.threads)
+    with (
+        ScenarioBag(str(path), BagNames()) as bag,
+        _progress(n_sweeps, "localization run", show) as bar,
+        closing(clouds),  # an error stops the queued sweeps at once
+    ):
         bag.write_tf_static(t0, mount.translation, Rotation.from_matrix(mount.rotation).as_quat())
 
         def motion(i0: int, i1: int) -> None:
-            for i in range(i0, min(i1, len(traj.position))):
-                t = t0 + i / RATE
-                bag.write_imu(t, imu.gyro[i], imu.accel[i], gyro_var, accel_var)
-                if i % gt_step == 0:
-                    bag.write_ground_truth(t, traj.position[i], traj.quat[i], vel_body[i], gyro_true[i])
+            """IMU and ground truth samples i0 .. i1 - 1 (ground truth every gt_step-th sample)."""
+            i = np.arange(i0, min(i1, len(traj.position)))
+            bag.write_imu(_sample_stamps_ns(t0, i), imu.gyro[i], imu.accel[i], gyro_var, accel_var)
+            g = i[i % gt_step == 0]
+            stamps = _sample_stamps_ns(t0, g)
+            bag.write_ground_truth(stamps, traj.position[g], traj.quat[g], vel_body[g], gyro_true[g])
 
-        for k in range(n_sweeps):
+        for k, (n_rays, cloud) in enumerate(clouds):
             motion(k * samples_per_sweep, (k + 1) * samples_per_sweep)
-            sweep = sensor.sweep(k)
-            t_mid = (k + 0.5) / sensor.rate
-            frozen = movers.mesh_at(t_mid, traj.interpolate(np.array([t_mid]))[0][0, :2])
-            cloud = sim.simulate(traj, k / sensor.rate, sweep, rng, frozen)
-            bag.write_points(t0 + k / sensor.rate, t0 + (k + 1) / sensor.rate, cloud)
-            rays += len(sweep.dt)
+            start, end = _sample_stamps_ns(t0, np.array([k, k + 1]) * samples_per_sweep)
+            bag.write_points(int(start), int(end), cloud)
+            rays += n_rays
             points += len(cloud)
             bar.update()
         motion(n_sweeps * samples_per_sweep, len(traj.position))
@@ -151,16 +173,20 @@ def _write_map(path: Path, cfg: ScenarioConfig, sim: SweepSimulator, traj: Traje
     estimate = drifted(traj, cfg.drift, _rng(cfg.seed, 3))
     voxels = VoxelMap(cfg.map_leaf)
     sensor = sim.sensor
-    rng = _rng(cfg.seed, 5)
     n_sweeps = int(np.floor(traj.duration * sensor.rate + 1e-9))
+
+    def placed_sweep(k: int) -> tuple[int, np.ndarray, np.ndarray]:
+        sweep = sensor.sweep(k)
+        cloud = sim.simulate(traj, k / sensor.rate, sweep, _rng(cfg.seed, 5, k))
+        return len(sweep.dt), to_map(estimate, mount, k / sensor.rate, cloud), cloud["intensity"]
+
     rays = points = 0
-    with _progress(n_sweeps, "mapping run", show) as bar:
-        for k in range(n_sweeps):
-            sweep = sensor.sweep(k)
-            cloud = sim.simulate(traj, k / sensor.rate, sweep, rng)
-            voxels.add(to_map(estimate, mount, k / sensor.rate, cloud), cloud["intensity"])
-            rays += len(sweep.dt)
-            points += len(cloud)
+    swept = ordered_map(placed_sweep, n_sweeps, cfg.threads)
+    with _progress(n_sweeps, "mapping run", show) as bar, closing(swept):
+        for n_rays, xyz, intensity in swept:
+            voxels.add(xyz, intensity)
+            rays += n_rays
+            points += len(xyz)
             bar.update()
     with PcdStreamWriter(path, MAP_DTYPE) as writer:
         for chunk in voxels.chunks():
@@ -195,39 +221,46 @@ def _describe(cfg: ScenarioConfig, world, loc: Trajectory, mapping: Trajectory, 
     }
 
 
-def generate(
-    cfg: ScenarioConfig, out_dir: str | os.PathLike, overwrite: bool = False, progress: bool = True
-) -> Summary:
-    """Simulates the scenario ``cfg`` into ``out_dir`` (must not exist unless ``overwrite``)."""
+def generate(cfg: ScenarioConfig, out_dir: str | os.PathLike, force: bool = False, progress: bool = True) -> Summary:
+    """Simulates the scenario ``cfg`` into ``out_dir`` (absent or empty, or replaced with ``force``)."""
     cfg = cfg.resolved()
     world = make_world(cfg.world, cfg.seed, cfg.scale)
     out = Path(out_dir).absolute()
-    if out.exists() and not overwrite:
-        raise UserError(f"output directory {out} already exists: choose another --output or pass --overwrite")
-    if not out.parent.is_dir():
-        raise UserError(f"cannot create {out}: parent directory {out.parent} does not exist")
+    check_output_dir(out, force)
     loc = localization_trajectory(world, cfg.scale, _rng(cfg.seed, 1))
     if cfg.duration is not None:
         loc = loc.truncated(cfg.duration)
     mapping = mapping_trajectory(world, loc, _rng(cfg.seed, 2))
     movers = make_movers(world, cfg.scale, loc.duration, cfg.movers, _rng(cfg.seed, 7))
     mount = Mount(np.array(MOUNTS[cfg.world]), np.eye(3))
-    with atomic_directory(out) as tmp, RayCaster(world.mesh, cfg.threads) as caster:
+    with atomic_directory(out) as tmp, RayCaster(world.mesh, threads=1) as caster:
         sim = SweepSimulator(world.mesh, caster, get_sensor(cfg.sensor), mount)
         (tmp / "scenario.yaml").write_text(
             yaml.safe_dump(_describe(cfg, world, loc, mapping, mount, movers), sort_keys=False)
         )
         _write_tum(tmp / "ground_truth.tum", cfg.start_time, loc)
-        start = time.perf_counter()
+        start, cpu_start = time.perf_counter(), time.process_time()
         sweeps, rays, points = _write_bag(tmp / "scenario.bag", cfg, sim, loc, mount, movers, progress)
-        mid = time.perf_counter()
+        mid, cpu_mid = time.perf_counter(), time.process_time()
         map_sweeps, map_rays, map_in, map_points = _write_map(
             tmp / "global_map.pcd", cfg, sim, mapping, mount, progress
         )
-        end = time.perf_counter()
+        end, cpu_end = time.perf_counter(), time.process_time()
         for name in FILES:  # on disk before the directory is published
             with open(tmp / name, "rb") as f:
                 os.fsync(f.fileno())
     return Summary(
-        out, loc.duration, sweeps, rays, points, map_sweeps, map_rays, map_in, map_points, mid - start, end - mid
+        out,
+        loc.duration,
+        sweeps,
+        rays,
+        points,
+        map_sweeps,
+        map_rays,
+        map_in,
+        map_points,
+        mid - start,
+        end - mid,
+        cpu_mid - cpu_start,
+        cpu_end - cpu_mid,
     )

@@ -61,6 +61,11 @@ def _unit(azimuth: np.ndarray, elevation: np.ndarray) -> np.ndarray:
     return np.stack([ce * np.cos(azimuth), ce * np.sin(azimuth), np.sin(elevation)], axis=1)
 
 
+def _fraction(x: np.ndarray) -> np.ndarray:
+    """x mod 1 for non-negative x, in place (np.mod is an order of magnitude slower than floor)."""
+    return np.subtract(x, np.floor(x), out=x)
+
+
 @dataclass(frozen=True)
 class SpinningLidar(Lidar):
     rings: int = 32
@@ -104,12 +109,20 @@ class NonRepetitiveLidar(Lidar):
     def sweep(self, index: int) -> Sweep:
         n = self.rays_per_sweep
         k = np.arange(n, dtype=np.float64) + float(index) * n
-        u = np.mod(0.5 + k / _PLASTIC, 1.0)
-        v = np.mod(0.5 + k / _PLASTIC**2, 1.0)
+        u, v = _fraction(0.5 + k / _PLASTIC), _fraction(0.5 + k / _PLASTIC**2)
         lo, hi = np.sin(np.radians(self.elevation_min_deg)), np.sin(np.radians(self.elevation_max_deg))
-        elevation = np.arcsin(lo + v * (hi - lo))
-        ring = (np.arange(n) % self.emitters).astype(np.uint16)
-        return Sweep(np.arange(n) / self.rays_per_second, _unit(2 * np.pi * u, elevation), ring)
+        sin_el = lo + v * (hi - lo)  # uniform in sin(elevation): uniform over the solid angle
+        cos_el = np.sqrt(1.0 - sin_el * sin_el)
+        azimuth = 2 * np.pi * u
+        directions = np.empty((n, 3), order="F")  # columns contiguous for the per-component maths
+        np.multiply(cos_el, np.cos(azimuth), out=directions[:, 0])
+        np.multiply(cos_el, np.sin(azimuth), out=directions[:, 1])
+        directions[:, 2] = sin_el
+        return Sweep(np.arange(n) / self.rays_per_second, directions, self._rings)
+
+    @cached_property
+    def _rings(self) -> np.ndarray:
+        return (np.arange(self.rays_per_sweep) % self.emitters).astype(np.uint16)
 
 
 SENSORS: dict[str, Lidar] = {

@@ -15,6 +15,7 @@ normal and its x axis along the heading. Times are seconds from the start of the
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.ndimage import gaussian_filter1d, maximum_filter1d
@@ -93,12 +94,50 @@ class Trajectory:
         q = self.quat[i] * (1 - w) + self.quat[i + 1] * w
         return pos, q / np.linalg.norm(q, axis=1, keepdims=True)
 
+    @cached_property
+    def _knots(self) -> tuple[np.ndarray, ...]:
+        """Component-major samples and their increments to the next sample, for :meth:`frames`."""
+        p, q = np.ascontiguousarray(self.position.T), np.ascontiguousarray(self.quat.T, dtype=np.float32)
+        return p, np.diff(p, axis=1), q, np.diff(q, axis=1)
 
-def rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotates vectors ``v`` (k, 3) or (3,) by unit quaternions ``q`` (k, 4) x y z w."""
-    u, w = q[:, :3], q[:, 3:4]
-    c = 2.0 * np.cross(u, v)
-    return v + w * c + np.cross(u, c)
+    def frames(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions (3, k) [m] and rotation matrices (3, 3, k) (float32, map from base_link) at times
+        ``t`` [s]: the interpolation of :meth:`interpolate`, laid out component-major so that per-ray
+        poses cost a few passes over contiguous arrays (see :func:`transform`)."""
+        p0, dp, q0, dq = self._knots
+        f = np.clip(np.asarray(t, dtype=np.float64) * RATE, 0.0, len(self.position) - 1.0)
+        i = np.minimum(f.astype(np.intp), len(self.position) - 2)
+        w = f - i
+        pos = np.take(p0, i, axis=1) + w * np.take(dp, i, axis=1)
+        q = np.take(q0, i, axis=1) + w.astype(np.float32) * np.take(dq, i, axis=1)
+        x, y, z, qw = q
+        s = np.float32(2.0) / np.einsum("ij,ij->j", q, q)  # normalises the interpolated quaternion
+        xs, ys, zs = x * s, y * s, z * s
+        xx, yy, zz, xy, xz, yz = x * xs, y * ys, z * zs, x * ys, x * zs, y * zs
+        wx, wy, wz = qw * xs, qw * ys, qw * zs
+        one = np.float32(1.0)
+        rot = np.empty((3, 3, len(w)), dtype=np.float32)
+        rot[0, 0], rot[0, 1], rot[0, 2] = one - (yy + zz), xy - wz, xz + wy
+        rot[1, 0], rot[1, 1], rot[1, 2] = xy + wz, one - (xx + zz), yz - wx
+        rot[2, 0], rot[2, 1], rot[2, 2] = xz - wy, yz + wx, one - (xx + yy)
+        return pos, rot
+
+
+def transform(rot: np.ndarray, v: np.ndarray, offset: np.ndarray | None = None, out: np.ndarray | None = None):
+    """``rot @ v (+ offset)`` per column: ``rot`` (3, 3, k), ``v`` (3, k) or a constant (3,), ``offset``
+    (3, k) or None. Writes into ``out`` (k, 3) when given (any float dtype), else returns (3, k)."""
+    v = np.asarray(v)
+    col = v if v.ndim == 2 else v.reshape(3, 1)
+    res = out.T if out is not None else np.empty((3, rot.shape[2]), dtype=np.result_type(rot, col))
+    for a in range(3):
+        acc = rot[a, 0] * col[0]
+        acc += rot[a, 1] * col[1]
+        acc += rot[a, 2] * col[2]
+        if offset is not None:
+            np.add(offset[a], acc, out=res[a], casting="same_kind")
+        else:
+            res[a] = acc
+    return res if out is None else out
 
 
 def plan_route(graph: PathGraph, length: float, rng: np.random.Generator) -> list[int]:

@@ -4,7 +4,7 @@ Input PCDs are read chunk by chunk; each chunk is sorted by tile (grouping.py) a
 the buffer passes its share of the memory budget it is spilled to per-tile files (buffer.py). At the
 end every tile is written once as a binary PCD with the input's fields and types, together with
 ``index.json`` and Autoware's ``pointcloud_map_metadata.yaml`` (index.py), into a temporary
-directory that replaces OUT_DIR only when complete (outdir.py).
+directory that replaces OUT_DIR only when complete (atomic.py).
 
 Memory: ``memory_mb`` bounds the working set: about 30 % for decoding and sorting one chunk, 55 %
 for buffered points; the rest covers per-tile bookkeeping (about 1 kB per tile, so proportional to
@@ -23,7 +23,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from grid_puzzle_localization.atomic import atomic_directory
+from grid_puzzle_localization.atomic import atomic_directory, check_output_dir
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.grid import check_grid_size, tile_center, tile_filename
 from grid_puzzle_localization.pcd import PcdChunks, PcdHeader, iter_pcd_chunks, read_pcd_header
@@ -31,7 +31,6 @@ from grid_puzzle_localization.pcd.reader import check_xyz
 from grid_puzzle_localization.tiling.buffer import TileBuffer, TileData, write_all
 from grid_puzzle_localization.tiling.grouping import group_chunk
 from grid_puzzle_localization.tiling.index import TileEntry, TileIndex, write_autoware_metadata, write_index
-from grid_puzzle_localization.tiling.outdir import check_output_dir
 from grid_puzzle_localization.tiling.parallel import in_background
 
 MIN_MEMORY_MB = 1.0
