@@ -28,6 +28,7 @@ from grid_puzzle_localization.tiling import (
     tile_map,
     verify_tiles,
 )
+from grid_puzzle_localization.tiling.buffer import write_all
 from grid_puzzle_localization.tiling.grouping import key_positions, stable_tile_order
 from grid_puzzle_localization.tiling.index import TileEntry, TileIndex, write_index
 from grid_puzzle_localization.tiling.tiler import MIN_TILES_TO_FORK
@@ -373,3 +374,19 @@ def test_gpm_tile_imports_no_other_command():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert done.stdout.strip().splitlines()[-1] == "[]"
     assert "--grid-size" in done.stdout
+
+
+def test_write_all_finishes_a_partial_writev(tmp_path, monkeypatch):
+    parts = [b"header\n", np.arange(10, dtype=np.uint8), b"", np.frombuffer(b"tail", dtype=np.uint8)]
+    expected = b"".join(bytes(p) for p in parts)
+    real_writev = os.writev
+    monkeypatch.setattr(os, "writev", lambda fd, buffers: os.write(fd, bytes(buffers[0])[:5]))  # as a kernel may
+    fd = os.open(tmp_path / "out", os.O_WRONLY | os.O_CREAT)
+    write_all(fd, parts)
+    os.close(fd)
+    assert (tmp_path / "out").read_bytes() == expected
+    monkeypatch.setattr(os, "writev", real_writev)
+    fd = os.open(tmp_path / "out2", os.O_WRONLY | os.O_CREAT)
+    write_all(fd, parts * 700)  # more buffers than one writev takes
+    os.close(fd)
+    assert (tmp_path / "out2").read_bytes() == expected * 700

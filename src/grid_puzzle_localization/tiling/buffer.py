@@ -129,11 +129,15 @@ class TileBuffer:
 
 
 def write_all(fd: int, parts: list[bytes | np.ndarray]) -> None:
-    """Writes byte buffers to ``fd`` in order, with as few system calls as the kernel allows."""
+    """Writes byte buffers (bytes or 1-D uint8 arrays) to ``fd`` in order, with as few system calls as
+    the kernel allows: one writev per 1024 buffers unless it writes less than asked."""
     for k in range(0, len(parts), _IOV_MAX):
-        batch = [memoryview(p).cast("B") for p in parts[k : k + _IOV_MAX]]
+        batch = parts[k : k + _IOV_MAX]
         written = os.writev(fd, batch)
-        for view in batch:  # finish a partial write (e.g. > 2 GiB) buffer by buffer
+        if written == sum(map(len, batch)):
+            continue
+        for part in batch:  # finish a partial write (e.g. > 2 GiB) buffer by buffer
+            view = memoryview(part).cast("B")
             skip = min(written, len(view))
             written -= skip
             view = view[skip:]
