@@ -100,13 +100,14 @@ def tile_map(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, co
         stats = tiles.stats
         names = [tile_filename(i, j, s) for i, j in zip(stats["i"].tolist(), stats["j"].tolist(), strict=True)]
         header_of = _tile_header(headers[0])
-        writers = jobs if len(tiles) >= MIN_TILES_TO_FORK else 1
+        fork = jobs > 1 and len(tiles) >= MIN_TILES_TO_FORK
+        writers = jobs if fork else 1
         bounds = [len(tiles) * k // writers for k in range(writers + 1)]
-        jobs = [
+        writer_jobs = [
             functools.partial(_write_tile_files, tiles, names, header_of, tmp, range(a, b), show and a == 0)
             for a, b in itertools.pairwise(bounds)
         ]
-        with in_background(jobs, fork=writers > 1):
+        with in_background(writer_jobs, fork=fork):
             index = _tile_index(s, headers[0], read, tiles, names, header_of)
             write_index(tmp, index)
             write_autoware_metadata(tmp, index)
