@@ -1,15 +1,16 @@
 """Cutting a global point-cloud map into grid puzzle tiles (the paper's Algorithm 1), streaming.
 
-Input PCDs are read chunk by chunk; each chunk is sorted by tile (grouping.py) and buffered; when
-the buffer passes its share of the memory budget it is spilled to per-tile files (buffer.py). At the
-end every tile is written once as a binary PCD with the input's fields and types, together with
-``index.json`` and Autoware's ``pointcloud_map_metadata.yaml`` (index.py), into a temporary
-directory that replaces OUT_DIR only when complete (outdir.py).
+Input PCDs are read chunk by chunk; each chunk is sorted by tile (grouping.py) on one of ``jobs``
+threads while the next is read (parallel.map_ahead) and buffered; when the buffer passes its share
+of the memory budget it is spilled to per-tile files (buffer.py). At the end every tile is written
+once as a binary PCD with the input's fields and types (one open, writev and close per tile, by
+``jobs`` forked writers), while this process writes ``index.json`` and Autoware's
+``pointcloud_map_metadata.yaml`` (index.py). All of it goes into a temporary directory that is
+flushed to disk with one syncfs and then replaces OUT_DIR (atomic.atomic_directory, outdir.py).
 
-Memory: ``memory_mb`` bounds the working set: about 30 % for decoding and sorting one chunk, 55 %
-for buffered points; the rest covers per-tile bookkeeping (about 1 kB per tile, so proportional to
-the map's area, not its point count).
-"""
+Memory: ``memory_mb`` bounds the working set: about 30 % for decoding and sorting the chunks in
+flight, 55 % for buffered points; the rest covers per-tile bookkeeping (about 1 kB per tile, so
+proportional to the map's area, not its point count)."""
 
 from __future__ import annotations
 
