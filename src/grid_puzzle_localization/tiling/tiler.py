@@ -165,7 +165,7 @@ def _write_tile_files(
     counts = tiles.stats["count"].tolist()
     dir_fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)  # names resolve relative to it: no path work
     try:
-        for t in _progress(show, which, desc="writing tiles", unit="tile"):
+        for t in _progress(show, which, desc=f"writing tiles {which.start}-{which.stop - 1}", unit="tile"):
             fd = os.open(names[t], os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644, dir_fd=dir_fd)
             try:
                 head = [header_of(counts[t])]
