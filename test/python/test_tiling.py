@@ -20,7 +20,8 @@ from hypothesis import strategies as st
 from grid_puzzle_localization.cli import main
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.grid import tile_filename
-from grid_puzzle_localization.pcd import read_pcd, write_pcd
+from grid_puzzle_localization.pcd import read_pcd, read_pcd_header, write_pcd
+from grid_puzzle_localization.pcd.header import parse_header
 from grid_puzzle_localization.tiling import (
     AUTOWARE_METADATA_FILE,
     TileConfig,
@@ -31,7 +32,7 @@ from grid_puzzle_localization.tiling import (
 from grid_puzzle_localization.tiling.buffer import write_all
 from grid_puzzle_localization.tiling.grouping import key_positions, stable_tile_order
 from grid_puzzle_localization.tiling.index import TileEntry, TileIndex, write_index
-from grid_puzzle_localization.tiling.tiler import MIN_TILES_TO_FORK
+from grid_puzzle_localization.tiling.tiler import MIN_TILES_TO_FORK, _TileHeader
 
 FIELDS = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<u1"), ("t", "<f8"), ("n", "<f4", (2,))])
 
@@ -390,3 +391,15 @@ def test_write_all_finishes_a_partial_writev(tmp_path, monkeypatch):
     write_all(fd, parts * 700)  # more buffers than one writev takes
     os.close(fd)
     assert (tmp_path / "out2").read_bytes() == expected * 700
+
+
+def test_tile_header_declares_n_points_and_knows_its_size(tmp_path):
+    src = tmp_path / "map.pcd"
+    write_pcd(src, random_cloud(10, 1.0, seed=13))
+    template = _TileHeader.like(read_pcd_header(src))
+    for n in [0, 1, 9, 10, 99, 12_345, 10**12]:
+        text = template.of(n)
+        assert template.size(n) == len(text)
+        parsed = parse_header(text, "tile")
+        assert (parsed.points, parsed.width, parsed.height, parsed.data) == (n, n, 1, "binary")
+        assert parsed.dtype == FIELDS and parsed.header_bytes == len(text)

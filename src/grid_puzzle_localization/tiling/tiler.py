@@ -20,7 +20,7 @@ import itertools
 import os
 import sys
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -100,16 +100,16 @@ def tile_map(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, co
         tiles = buffer.finish()
         stats = tiles.stats
         names = [tile_filename(i, j, s) for i, j in zip(stats["i"].tolist(), stats["j"].tolist(), strict=True)]
-        header_of = _tile_header(headers[0])
+        header = _TileHeader.like(headers[0])
         fork = jobs > 1 and len(tiles) >= MIN_TILES_TO_FORK
         writers = jobs if fork else 1
         bounds = [len(tiles) * k // writers for k in range(writers + 1)]
         writer_jobs = [
-            functools.partial(_write_tile_files, tiles, names, header_of, tmp, range(a, b), show and a == 0)
+            functools.partial(_write_tile_files, tiles, names, header, tmp, range(a, b), show and a == 0)
             for a, b in itertools.pairwise(bounds)
         ]
         with in_background(writer_jobs, fork=fork):
-            index = _tile_index(s, headers[0], read, tiles, names, header_of)
+            index = _tile_index(s, headers[0], read, tiles, names, header)
             write_index(tmp, index)
             write_autoware_metadata(tmp, index)
         if buffer.spill_dir.exists():
@@ -144,18 +144,34 @@ def _stream(
     return read
 
 
-def _tile_header(header: PcdHeader) -> Callable[[int], bytes]:
-    """Binary PCD header of a tile of n points (the input's fields), by n."""
-    empty = dataclasses.replace(header, data="binary", width=0, height=1, points=0).text()
-    head, rest = empty.split("\nWIDTH 0\n")
-    middle, tail = rest.split("\nPOINTS 0\n")
-    return lambda n: f"{head}\nWIDTH {n}\n{middle}\nPOINTS {n}\n{tail}".encode()
+@dataclass(frozen=True)
+class _TileHeader:
+    """Binary PCD header of a tile of n points with the input's fields: fixed text around n, which
+    appears twice (WIDTH and POINTS). Each tile's header is formatted once, by its writer."""
+
+    before_width: str
+    before_points: str
+    after_points: str
+
+    @classmethod
+    def like(cls, header: PcdHeader) -> _TileHeader:
+        empty = dataclasses.replace(header, data="binary", width=0, height=1, points=0).text()
+        head, rest = empty.split("\nWIDTH 0\n")
+        middle, tail = rest.split("\nPOINTS 0\n")
+        return cls(f"{head}\nWIDTH ", f"\n{middle}\nPOINTS ", f"\n{tail}")
+
+    def of(self, n: int) -> bytes:
+        return f"{self.before_width}{n}{self.before_points}{n}{self.after_points}".encode()  # ASCII
+
+    def size(self, n: int) -> int:
+        """len(self.of(n)) without formatting it."""
+        return len(self.before_width) + len(self.before_points) + len(self.after_points) + 2 * len(str(n))
 
 
 def _write_tile_files(
     tiles: TileSet,
     names: list[str],
-    header_of: Callable[[int], bytes],
+    header: _TileHeader,
     directory: Path,
     which: range,
     show: bool,
@@ -168,7 +184,7 @@ def _write_tile_files(
         for t in _progress(show, which, desc=f"writing tiles {which.start}-{which.stop - 1}", unit="tile"):
             fd = os.open(names[t], os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644, dir_fd=dir_fd)
             try:
-                head = [header_of(counts[t])]
+                head = [header.of(counts[t])]
                 spill = tiles.spills[t]
                 if spill is not None:
                     write_all(fd, head)
@@ -197,7 +213,7 @@ def _tile_index(
     read: list[tuple[Path, PcdChunks]],
     tiles: TileSet,
     names: list[str],
-    header_of: Callable[[int], bytes],
+    tile_header: _TileHeader,
 ) -> TileIndex:
     record = header.record_bytes
     stats = tiles.stats
@@ -228,7 +244,7 @@ def _tile_index(
                 center=(tile_center(i, s), tile_center(j, s)),
                 points=n,
                 bounds={"min": low, "max": high},
-                bytes=len(header_of(n)) + n * record,
+                bytes=tile_header.size(n) + n * record,
                 data_bytes=n * record,
             )
             for name, i, j, n, low, high in zip(names, *columns, strict=True)
