@@ -1,7 +1,13 @@
 #!/usr/bin/env python3
 """Benchmark of `gpm tile`: the real campus map (nova_utd_tiles, 5.05 M points) merged into one
 global PCD (not timed), re-cut with s = 2 m under --memory-mb 200 in a child process whose wall time
-and peak RSS are measured. Prints one JSON line (median over repeats, with hardware info)."""
+and peak RSS are measured. Prints one JSON line (median over repeats, with hardware info).
+
+By default everything goes to the repo's file system (a temporary directory under build/), where a
+user's tiles would go; --tmp-dir /dev/shm times the tiler without a disk. Each repeat writes a fresh
+directory and all are deleted at the end: deleting tens of thousands of files right before creating
+as many slows the creation down on some file systems (ext4 without a journal scans past inodes
+deleted in the last minutes), which would time the benchmark's own clean-up, not the tiler."""
 
 from __future__ import annotations
 
@@ -9,7 +15,6 @@ import argparse
 import json
 import os
 import platform
-import shutil
 import statistics
 import subprocess
 import sys
@@ -50,28 +55,36 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--grid-size", type=float, default=2.0)
     parser.add_argument("--memory-mb", type=float, default=200.0)
-    parser.add_argument("--tmp-dir", default=None, help="where the merged map and the tiles go (default: system temp)")
+    parser.add_argument("--jobs", type=int, default=2, help="gpm tile --jobs")
+    parser.add_argument(
+        "--tmp-dir",
+        type=Path,
+        default=ROOT / "build",
+        help="where the merged map and the tiles go (default: build/ in the repo, i.e. the repo's file system)",
+    )
     args = parser.parse_args()
     inputs = sorted(CAMPUS_TILES.glob("*.pcd"))
     if not inputs:
         raise SystemExit(f"bench_tiling: no campus tiles in {CAMPUS_TILES}")
+    args.tmp_dir.mkdir(parents=True, exist_ok=True)
+    load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="bench_tiling_", dir=args.tmp_dir) as tmp:
         campus = Path(tmp) / "campus.pcd"
         points_in = merge_pcds(inputs, campus)
-        out = Path(tmp) / "tiles"
         seconds, rss, phases = [], [], []
-        for _ in range(args.repeats):
-            shutil.rmtree(out, ignore_errors=True)
-            os.sync()  # flush the previous run's deletions and writes so they do not count against this one
+        for k in range(args.repeats):
+            out = Path(tmp) / f"tiles{k}"
+            os.sync()  # flush earlier writes so they do not count against this run
             command = [sys.executable, "-c", GPM, "tile", "--json", "--grid-size", f"{args.grid_size:g}"]
             wall, peak, summary = run_child(
-                [*command, "--memory-mb", f"{args.memory_mb:g}", str(campus), "-o", str(out)]
+                [*command, "--memory-mb", f"{args.memory_mb:g}", "--jobs", str(args.jobs), str(campus), "-o", str(out)]
             )
             seconds.append(wall)
             rss.append(peak)
             phases.append(summary)
         index = load_tile_index(out)
         median = statistics.median(seconds)
+        sync = statistics.median(p["seconds_sync"] for p in phases)
         print(
             json.dumps(
                 {
@@ -91,14 +104,20 @@ def main() -> int:
                     "seconds_all": [round(s, 3) for s in seconds],
                     "seconds_stream_median": round(statistics.median(p["seconds_stream"] for p in phases), 3),
                     "seconds_write_median": round(statistics.median(p["seconds_write"] for p in phases), 3),
+                    "seconds_sync_median": round(sync, 3),
                     "stream_points_per_s": round(points_in / statistics.median(p["seconds_stream"] for p in phases)),
+                    "points_per_s_without_sync": round(
+                        points_in
+                        / statistics.median(s - p["seconds_sync"] for s, p in zip(seconds, phases, strict=True))
+                    ),
                     "timing": "seconds: median wall time of the gpm process (Python start-up included);"
-                    " stream: reading + grouping + spilling; write: creating the tile files and index",
+                    " stream: reading + grouping + spilling; write: creating the tile files and index;"
+                    " sync: flushing the tiles to disk (one syncfs) and publishing OUT_DIR",
                     "cpu": cpu_model(),
                     "cores": os.cpu_count(),
-                    "threads_used": 1,
-                    "processes_used": 2,  # gpm tile forks one child that creates the tile files
-                    "load_avg_1min": round(os.getloadavg()[0], 2),
+                    "threads_used": args.jobs,  # chunks grouped on --jobs threads
+                    "processes_used": args.jobs + 1,  # then --jobs forked tile writers beside the index writer
+                    "load_avg_1min": [round(load_before, 2), round(os.getloadavg()[0], 2)],  # before, after
                     "output_fs": subprocess.run(
                         ["stat", "-f", "-c", "%T", tmp], capture_output=True, text=True
                     ).stdout.strip(),

@@ -24,19 +24,25 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every subcommand, or, given ``command``, of that one only (the others are listed
+    by name and help, so `gpm --help` still shows them) to import no more than the run needs."""
     parser = argparse.ArgumentParser(prog="gpm", description="Grid puzzle map localization tools.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name, (module, help_text) in COMMANDS.items():
         cmd = sub.add_parser(name, help=help_text, description=help_text)
-        importlib.import_module(f"grid_puzzle_localization.{module}").add_arguments(cmd)
+        if command is None or name == command:
+            importlib.import_module(f"grid_puzzle_localization.{module}").add_arguments(cmd)
         cmd.set_defaults(_module=module)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    # The command is the first word (gpm itself has no options but -h), so only its module is imported.
+    command = next((word for word in argv if not word.startswith("-")), None)
+    args = build_parser(command).parse_args(argv)
     try:
         return int(importlib.import_module(f"grid_puzzle_localization.{args._module}").run(args) or 0)
     except UserError as err:

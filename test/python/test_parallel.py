@@ -1,10 +1,13 @@
-"""The forked background job: it runs exactly once, beside the caller, and its failure surfaces."""
+"""The forked background jobs (each runs exactly once, beside the caller, and a failure surfaces) and the
+thread pool that groups chunks ahead (results in order, bounded work in flight)."""
 
 import os
+import threading
+import time
 
 import pytest
 
-from grid_puzzle_localization.tiling.parallel import in_background
+from grid_puzzle_localization.tiling.parallel import in_background, map_ahead
 
 
 @pytest.mark.parametrize("fork", [True, False])
@@ -12,7 +15,7 @@ def test_job_runs_once_beside_the_caller(tmp_path, fork):
     def job() -> None:
         (tmp_path / f"job.{os.getpid()}").write_text("done")
 
-    with in_background(job, fork):
+    with in_background([job], fork):
         (tmp_path / f"caller.{os.getpid()}").write_text("done")
     names = sorted(p.name.split(".")[0] for p in tmp_path.iterdir())
     pids = {p.name.split(".")[1] for p in tmp_path.iterdir()}
@@ -24,7 +27,7 @@ def test_failed_child_raises_after_the_block(tmp_path):
     def job() -> None:
         raise RuntimeError("disk full")
 
-    with pytest.raises(OSError, match="tile writer process failed"), in_background(job, fork=True):
+    with pytest.raises(OSError, match="tile writer process failed"), in_background([job], fork=True):
         (tmp_path / "caller").write_text("done")
     assert (tmp_path / "caller").exists()
 
@@ -33,6 +36,53 @@ def test_caller_failure_still_waits_for_the_child(tmp_path):
     def job() -> None:
         (tmp_path / "job").write_text("done")
 
-    with pytest.raises(ValueError), in_background(job, fork=True):
+    with pytest.raises(ValueError), in_background([job], fork=True):
         raise ValueError("index failed")
     assert (tmp_path / "job").read_text() == "done"  # the child had finished before the error surfaced
+
+
+def test_two_jobs_run_in_two_children(tmp_path):
+    def job(name: str):
+        return lambda: (tmp_path / f"{name}.{os.getpid()}").write_text("done")
+
+    with in_background([job("a"), job("b")], fork=True):
+        pass
+    pids = {p.name.split(".")[1] for p in tmp_path.iterdir()}
+    assert sorted(p.name.split(".")[0] for p in tmp_path.iterdir()) == ["a", "b"]
+    assert len(pids) == 2 and str(os.getpid()) not in pids
+
+
+def test_map_ahead_keeps_order_and_bounds_the_work_in_flight():
+    lock = threading.Lock()
+    running, most = 0, 0
+    taken = []
+
+    def items():
+        for k in range(40):
+            taken.append(k)
+            yield k
+
+    def slow_square(k: int) -> int:
+        nonlocal running, most
+        with lock:
+            running += 1
+            most = max(most, running)
+        time.sleep(0.002 * (k % 3))  # later items finish first now and then
+        with lock:
+            running -= 1
+        return k * k
+
+    for k, result in enumerate(map_ahead(slow_square, items(), threads=2)):
+        assert result == k * k
+        assert len(taken) <= k + 2  # items are read at most `threads` ahead of the consumer
+    assert most <= 2
+
+
+def test_map_ahead_raises_the_job_error():
+    def fail_on_three(k: int) -> int:
+        if k == 3:
+            raise ValueError("bad chunk 3")
+        return k
+
+    with pytest.raises(ValueError, match="bad chunk 3"):
+        list(map_ahead(fail_on_three, range(10), threads=2))

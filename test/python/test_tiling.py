@@ -1,8 +1,10 @@
 """The tiler against brute force: every finite point in exactly one tile, bit for bit and in input
 order, the tile being floor(x / s), floor(y / s) computed per point in plain Python."""
 
+import errno
 import json
 import math
+import os
 import shutil
 import subprocess
 import sys
@@ -18,7 +20,8 @@ from hypothesis import strategies as st
 from grid_puzzle_localization.cli import main
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.grid import tile_filename
-from grid_puzzle_localization.pcd import read_pcd, write_pcd
+from grid_puzzle_localization.pcd import read_pcd, read_pcd_header, write_pcd
+from grid_puzzle_localization.pcd.header import parse_header
 from grid_puzzle_localization.tiling import (
     AUTOWARE_METADATA_FILE,
     TileConfig,
@@ -26,7 +29,10 @@ from grid_puzzle_localization.tiling import (
     tile_map,
     verify_tiles,
 )
-from grid_puzzle_localization.tiling.grouping import stable_tile_order
+from grid_puzzle_localization.tiling.buffer import write_all
+from grid_puzzle_localization.tiling.grouping import key_positions, stable_tile_order
+from grid_puzzle_localization.tiling.index import TileEntry, TileIndex, write_index
+from grid_puzzle_localization.tiling.tiler import MIN_TILES_TO_FORK, _TileHeader
 
 FIELDS = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<u1"), ("t", "<f8"), ("n", "<f4", (2,))])
 
@@ -266,3 +272,134 @@ def test_pcl_reads_the_tiles(tmp_path):
             capture_output=True,
         )
         assert read_pcd(converted).points.tobytes() == read_pcd(index.path(entry)).points.tobytes()
+
+
+# ---- the write path: many tiles, parallel writers, failure mid-write, the index text ----
+
+
+def wide_cloud(n: int, s: float, cells: int, seed: int) -> np.ndarray:
+    """A random cloud over cells x cells tiles (so more than MIN_TILES_TO_FORK of them), around the origin."""
+    cloud = random_cloud(n, s, seed)
+    rng = np.random.default_rng(seed + 1)
+    cloud["x"] = rng.uniform(-cells / 2 * s, cells / 2 * s, n)
+    cloud["y"] = rng.uniform(-cells / 3 * s, 2 * cells / 3 * s, n)
+    return cloud
+
+
+@pytest.mark.parametrize(("jobs", "memory_mb"), [(2, 64.0), (2, 1.0), (1, 64.0), (3, 1.0)])
+def test_many_tiles_with_parallel_writers_bit_for_bit(tmp_path, jobs, memory_mb):
+    s = 0.5
+    cloud = wide_cloud(40_000, s, cells=60, seed=11)
+    src = tmp_path / "map.pcd"
+    write_pcd(src, cloud)
+    result = tile_map([src], tmp_path / "tiles", TileConfig(grid_size=s, memory_mb=memory_mb, jobs=jobs))
+    assert len(result.index.tiles) >= MIN_TILES_TO_FORK  # so `jobs` writers really ran
+    assert (result.spills > 0) == (memory_mb == 1.0)
+    assert tiled_contents(tmp_path / "tiles") == expected_tiles(cloud, s)
+    assert sorted(p.name for p in (tmp_path / "tiles").iterdir()) == sorted(
+        [e.file for e in result.index.tiles] + ["index.json", AUTOWARE_METADATA_FILE]
+    )
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+@pytest.mark.parametrize("existing", [False, True])
+def test_failure_mid_write_leaves_nothing_behind(tmp_path, monkeypatch, jobs, existing):
+    src = tmp_path / "map.pcd"
+    write_pcd(src, wide_cloud(20_000, 0.5, cells=60, seed=12))
+    out = tmp_path / "tiles"
+    if existing:  # an earlier output that --force would replace: it must survive the failure intact
+        out.mkdir()
+        (out / "old.pcd").write_text("old tiles")
+    writev = os.writev
+    calls = 0
+
+    def disk_full_after_500_tiles(fd, buffers):  # inherited by the forked writers
+        nonlocal calls
+        calls += 1
+        if calls > 500:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return writev(fd, buffers)
+
+    monkeypatch.setattr(os, "writev", disk_full_after_500_tiles)
+    with pytest.raises(OSError, match="No space left" if jobs == 1 else "tile writer process failed"):
+        tile_map([src], out, TileConfig(grid_size=0.5, jobs=jobs, force=True, progress=False))
+    assert sorted(p.name for p in tmp_path.iterdir()) == (["map.pcd", "tiles"] if existing else ["map.pcd"])
+    if existing:
+        assert [p.name for p in out.iterdir()] == ["old.pcd"] and (out / "old.pcd").read_text() == "old tiles"
+
+
+def test_index_text_is_what_json_would_write(tmp_path):
+    entry = TileEntry(
+        key=(-3, 2_812_345),
+        stem="-5.0_5624691.0",
+        file="-5.0_5624691.0.pcd",
+        center=(-5.0, 5624691.0),
+        points=7,
+        bounds={"min": [-5.999999523162842, 5624690.5, -0.0], "max": [-4.0, 5624691.75, 1e-300]},
+        bytes=250,
+        data_bytes=84,
+    )
+    index = TileIndex(2.0, [{"name": "x", "size": 4, "type": "F", "count": 1}], 12, 7, 0, [], [entry, entry])
+    expected = {
+        "key": [-3, 2_812_345],
+        "stem": entry.stem,
+        "file": entry.file,
+        "center": [-5.0, 5624691.0],
+        "points": 7,
+        "bounds": entry.bounds,
+        "bytes": 250,
+        "data_bytes": 84,
+    }
+    assert entry.json_text() == json.dumps(expected, separators=(",", ":"))
+    write_index(tmp_path, index)
+    assert load_tile_index(tmp_path).tiles == [entry, entry]
+    assert json.loads((tmp_path / "index.json").read_text())["tiles"] == [expected, expected]
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.integers(-(2**62), 2**62), st.integers(-(2**62), 2**62)), min_size=1, max_size=60))
+def test_key_positions_equal_a_dictionary_lookup(keys):
+    distinct = sorted(set(keys))
+    where = {key: t for t, key in enumerate(distinct)}
+    si, sj = (np.array(column, dtype=np.int64) for column in zip(*distinct, strict=True))
+    qi, qj = (np.array(column, dtype=np.int64) for column in zip(*keys, strict=True))
+    assert key_positions(si, sj, qi, qj).tolist() == [where[key] for key in keys]
+
+
+def test_gpm_tile_imports_no_other_command():
+    code = (
+        "import sys; from grid_puzzle_localization.cli import main\n"
+        "try:\n    main(['tile', '--help'])\nexcept SystemExit:\n    pass\n"
+        "print(sorted(m for m in ('matplotlib', 'rospy', 'scipy', 'grid_puzzle_localization.sim') if m in sys.modules))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.strip().splitlines()[-1] == "[]"
+    assert "--grid-size" in done.stdout
+
+
+def test_write_all_finishes_a_partial_writev(tmp_path, monkeypatch):
+    parts = [b"header\n", np.arange(10, dtype=np.uint8), b"", np.frombuffer(b"tail", dtype=np.uint8)]
+    expected = b"".join(bytes(p) for p in parts)
+    real_writev = os.writev
+    monkeypatch.setattr(os, "writev", lambda fd, buffers: os.write(fd, bytes(buffers[0])[:5]))  # as a kernel may
+    fd = os.open(tmp_path / "out", os.O_WRONLY | os.O_CREAT)
+    write_all(fd, parts)
+    os.close(fd)
+    assert (tmp_path / "out").read_bytes() == expected
+    monkeypatch.setattr(os, "writev", real_writev)
+    fd = os.open(tmp_path / "out2", os.O_WRONLY | os.O_CREAT)
+    write_all(fd, parts * 700)  # more buffers than one writev takes
+    os.close(fd)
+    assert (tmp_path / "out2").read_bytes() == expected * 700
+
+
+def test_tile_header_declares_n_points_and_knows_its_size(tmp_path):
+    src = tmp_path / "map.pcd"
+    write_pcd(src, random_cloud(10, 1.0, seed=13))
+    template = _TileHeader.like(read_pcd_header(src))
+    for n in [0, 1, 9, 10, 99, 12_345, 10**12]:
+        text = template.of(n)
+        assert template.size(n) == len(text)
+        parsed = parse_header(text, "tile")
+        assert (parsed.points, parsed.width, parsed.height, parsed.data) == (n, n, 1, "binary")
+        assert parsed.dtype == FIELDS and parsed.header_bytes == len(text)

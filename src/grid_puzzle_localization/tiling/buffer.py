@@ -9,28 +9,37 @@ points, which keeps input order. Only per-tile statistics (count, bounds) persis
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from grid_puzzle_localization.tiling.grouping import GROUP_DTYPE, merge_stats, tile_spans
+from grid_puzzle_localization.tiling.grouping import GROUP_DTYPE, key_positions, merge_stats, tile_spans
 
 _IOV_MAX = 1024
 
 
-@dataclass(slots=True)
-class TileData:
-    """Where one tile's points are: ``spill`` file (or None) then ``parts`` (record bytes), in order."""
+@dataclass
+class TileSet:
+    """Every tile seen, in (i, j) order: its statistics and where its points are. Plain lists, so
+    per-tile access costs no numpy call (a writer touches each of ~1e5 tiles once)."""
 
-    i: int
-    j: int
-    points: int
-    bounds_min: list[float]  # x, y, z [m]
-    bounds_max: list[float]
-    spill: Path | None
-    parts: list[np.ndarray]
+    stats: np.ndarray  # GROUP_DTYPE row per tile: i, j, count, min, max [m] (chunk, start meaningless)
+    spills: list[Path | None]  # per tile: its spill file, written first, or None
+    row_begin: list[int]  # per tile: its buffered rows are rows[row_begin:row_end]
+    row_end: list[int]
+    row_chunk: list[int]  # per buffered row: the chunk, and the byte range of the tile's points in it
+    row_first: list[int]
+    row_last: list[int]
+    chunks: list[np.ndarray]  # buffered chunks, raw bytes
+
+    def __len__(self) -> int:
+        return len(self.stats)
+
+    def parts(self, t: int) -> list[np.ndarray]:
+        """Tile ``t``'s buffered points (after its spill file), as byte slices in input order."""
+        c, a, b = self.row_chunk, self.row_first, self.row_last
+        return [self.chunks[c[r]][a[r] : b[r]] for r in range(self.row_begin[t], self.row_end[t])]
 
 
 class TileBuffer:
@@ -43,7 +52,7 @@ class TileBuffer:
         self._groups: list[np.ndarray] = []
         self._bytes = 0
         self._stats = np.empty(0, dtype=GROUP_DTYPE)
-        self._spilled: set[tuple[int, int]] = set()
+        self._spilled: list[tuple[np.ndarray, np.ndarray]] = []  # (i, j) of the tiles spilled so far
 
     def add(self, sorted_records: np.ndarray, groups: np.ndarray) -> None:
         """Takes a chunk sorted by tile and its group rows (``groups['chunk']`` is overwritten)."""
@@ -57,57 +66,78 @@ class TileBuffer:
     def spill(self) -> None:
         """Appends every buffered tile to its spill file and empties the buffer."""
         self.spill_dir.mkdir(exist_ok=True)
-        for i, j, parts in self._buffered():
-            path = self._spill_path(i, j)
-            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600)
+        rows, first, last = self._fold()
+        buffered = self._tile_set(rows[first], [None] * len(first), first, last, rows)
+        keys = zip(buffered.stats["i"].tolist(), buffered.stats["j"].tolist(), strict=True)
+        for t, (i, j) in enumerate(keys):
+            fd = os.open(self._spill_path(i, j), os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600)
             try:
-                write_all(fd, parts)
+                write_all(fd, buffered.parts(t))
             finally:
                 os.close(fd)
-            self._spilled.add((i, j))
+        self._spilled.append((rows["i"][first], rows["j"][first]))
         self.spills += 1
-        self._clear()
+        self._chunks = []
+        self._bytes = 0
 
-    def drain(self) -> Iterator[TileData]:
-        """Every tile seen, in (i, j) order. The buffer is empty afterwards."""
-        buffered = {(i, j): parts for i, j, parts in self._buffered()}
-        self._clear()
-        stats = self._stats  # columns to lists once: iterating numpy rows costs microseconds each
-        columns = zip(*(stats[name].tolist() for name in ("i", "j", "count", "min", "max")), strict=True)
-        for i, j, count, low, high in columns:
-            spill = self._spill_path(i, j) if (i, j) in self._spilled else None
-            yield TileData(i, j, count, low, high, spill, buffered.get((i, j), []))
+    def finish(self) -> TileSet:
+        """Every tile seen; the buffered chunks move into the result (the buffer is empty afterwards)."""
+        rows, first, last = self._fold()
+        stats = self._stats
+        row_begin = np.zeros(len(stats), dtype=np.int64)
+        row_end = np.zeros(len(stats), dtype=np.int64)
+        at = key_positions(stats["i"], stats["j"], rows["i"][first], rows["j"][first])
+        row_begin[at], row_end[at] = first, last
+        spills: list[Path | None] = [None] * len(stats)
+        if self._spilled:
+            i, j = (np.concatenate(keys) for keys in zip(*self._spilled, strict=True))
+            for t in np.unique(key_positions(stats["i"], stats["j"], i, j)).tolist():
+                spills[t] = self._spill_path(int(stats["i"][t]), int(stats["j"][t]))
+        tiles = self._tile_set(stats, spills, row_begin, row_end, rows)
+        self._chunks = []
+        self._bytes = 0
+        return tiles
 
-    def _buffered(self) -> Iterator[tuple[int, int, list[np.ndarray]]]:
-        """(i, j, byte slices in input order) per buffered tile; folds the rows into the statistics."""
-        if not self._groups:
-            return
-        rows = np.concatenate(self._groups)
+    def _fold(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Takes the buffered group rows, sorted by (i, j, chunk), folding them into the statistics;
+        returns them with each buffered tile's first row and one past its last."""
+        rows = np.concatenate(self._groups) if self._groups else np.empty(0, dtype=GROUP_DTYPE)
+        self._groups.clear()
         self._stats = merge_stats(np.concatenate([self._stats, rows]))
         rows = rows[np.lexsort((rows["chunk"], rows["j"], rows["i"]))]
-        chunk = rows["chunk"].tolist()
-        begin = (rows["start"] * self.record_bytes).tolist()
-        end = ((rows["start"] + rows["count"]) * self.record_bytes).tolist()
         first, last = tile_spans(rows)
-        ti, tj = rows["i"][first].tolist(), rows["j"][first].tolist()
-        for t, (a, b) in enumerate(zip(first.tolist(), last.tolist(), strict=True)):
-            yield ti[t], tj[t], [self._chunks[chunk[r]][begin[r] : end[r]] for r in range(a, b)]
+        return rows, first, last
+
+    def _tile_set(
+        self, stats: np.ndarray, spills: list[Path | None], row_begin: np.ndarray, row_end: np.ndarray, rows: np.ndarray
+    ) -> TileSet:
+        start = rows["start"] * self.record_bytes
+        end = start + rows["count"] * self.record_bytes
+        return TileSet(
+            stats,
+            spills,
+            row_begin.tolist(),
+            row_end.tolist(),
+            rows["chunk"].tolist(),
+            start.tolist(),
+            end.tolist(),
+            self._chunks,
+        )
 
     def _spill_path(self, i: int, j: int) -> Path:
         return self.spill_dir / f"{i}_{j}.bin"
 
-    def _clear(self) -> None:
-        self._chunks.clear()
-        self._groups.clear()
-        self._bytes = 0
-
 
 def write_all(fd: int, parts: list[bytes | np.ndarray]) -> None:
-    """Writes byte buffers to ``fd`` in order, with as few system calls as the kernel allows."""
+    """Writes byte buffers (bytes or 1-D uint8 arrays) to ``fd`` in order, with as few system calls as
+    the kernel allows: one writev per 1024 buffers unless it writes less than asked."""
     for k in range(0, len(parts), _IOV_MAX):
-        batch = [memoryview(p).cast("B") for p in parts[k : k + _IOV_MAX]]
+        batch = parts[k : k + _IOV_MAX]
         written = os.writev(fd, batch)
-        for view in batch:  # finish a partial write (e.g. > 2 GiB) buffer by buffer
+        if written == sum(map(len, batch)):
+            continue
+        for part in batch:  # finish a partial write (e.g. > 2 GiB) buffer by buffer
+            view = memoryview(part).cast("B")
             skip = min(written, len(view))
             written -= skip
             view = view[skip:]

@@ -100,7 +100,19 @@ def merge_stats(rows: np.ndarray) -> np.ndarray:
 def tile_spans(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For rows sorted by tile: index of each tile's first row and one past its last."""
     starts = _run_starts(rows["i"], rows["j"])
-    return starts, np.append(starts[1:], len(rows))
+    return starts, np.append(starts[1:], len(rows))[: len(starts)]
+
+
+def key_positions(sorted_i: np.ndarray, sorted_j: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Position of each key (i, j) among the distinct keys (sorted_i, sorted_j), sorted by (i, j);
+    every key must be present. Each coordinate is replaced by its rank among the distinct values, so
+    the pair fits one int64 that sorts like (i, j) whatever the coordinates' range."""
+    ui, uj = np.unique(sorted_i), np.unique(sorted_j)
+
+    def dense(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.searchsorted(ui, a) * len(uj) + np.searchsorted(uj, b)
+
+    return np.searchsorted(dense(sorted_i, sorted_j), dense(i, j))
 
 
 def _run_starts(i: np.ndarray, j: np.ndarray) -> np.ndarray:

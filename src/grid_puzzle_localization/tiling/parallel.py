@@ -1,41 +1,74 @@
-"""Running one job in a forked child while the caller goes on, so both cores work.
+"""Using both cores: chunks grouped on a thread pool while the next one is read (numpy releases the
+GIL in its sorts, gathers and ufuncs), and jobs run in forked children while the caller goes on.
 
-The tiler creates tens of thousands of small files (system-call bound) in a child while the parent
-builds and writes the index. The child shares the parent's buffers copy-on-write: nothing is copied
-or pickled.
+The tiler creates tens of thousands of small files (system-call bound) in children while the parent
+builds and writes the index. The children share the parent's buffers copy-on-write: nothing is
+copied or pickled.
 """
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import os
 import sys
 import traceback
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+def map_ahead(fn: Callable[[T], R], items: Iterable[T], threads: int) -> Iterator[R]:
+    """``fn`` of each item, in order, computed on ``threads`` threads while the caller consumes earlier
+    results and ``items`` yields the next ones. At most ``threads`` items are in flight, so memory stays
+    bounded; with ``threads`` < 2 it is plain ``map``."""
+    if threads < 2:
+        yield from map(fn, items)
+        return
+    with ThreadPoolExecutor(threads) as pool:
+        pending: collections.deque = collections.deque()
+        for item in items:
+            pending.append(pool.submit(fn, item))
+            if len(pending) >= threads:
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
 
 
 @contextlib.contextmanager
-def in_background(job: Callable[[], None], fork: bool) -> Iterator[None]:
-    """Runs ``job`` in a forked child during the with-block (or, with ``fork`` False, right away in
-    this process). Leaving the block waits for the child, even when the block raised, so no child
-    outlives its caller; a failed child raises OSError."""
+def in_background(jobs: Sequence[Callable[[], None]], fork: bool) -> Iterator[None]:
+    """Runs each job in its own forked child during the with-block (or, with ``fork`` False, all of
+    them right away in this process). Leaving the block waits for every child, even when the block
+    raised, so no child outlives its caller; a failed child raises OSError."""
     if not (fork and hasattr(os, "fork")):
-        job()
+        for job in jobs:
+            job()
         yield
         return
-    pid = os.fork()
-    if pid == 0:  # child: never return into the caller's stack
-        status = 1
-        try:
-            job()
-            status = 0
-        except BaseException:
-            traceback.print_exc(file=sys.stderr)
-        finally:
-            os._exit(status)
+    pids = []
     try:
+        for job in jobs:
+            pid = os.fork()
+            if pid == 0:  # child: never return into the caller's stack
+                _run_child(job)
+            pids.append(pid)
         yield
     finally:
-        code = os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1])
-    if code != 0:
-        raise OSError(f"the tile writer process failed (exit status {code}); see the error above")
+        codes = [os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) for pid in pids]
+    failed = [code for code in codes if code != 0]
+    if failed:
+        raise OSError(f"a tile writer process failed (exit status {failed[0]}); see the error above")
+
+
+def _run_child(job: Callable[[], None]) -> None:
+    status = 1
+    try:
+        job()
+        status = 0
+    except BaseException:
+        traceback.print_exc(file=sys.stderr)
+    finally:
+        os._exit(status)

@@ -1,37 +1,38 @@
 """Cutting a global point-cloud map into grid puzzle tiles (the paper's Algorithm 1), streaming.
 
-Input PCDs are read chunk by chunk; each chunk is sorted by tile (grouping.py) and buffered; when
-the buffer passes its share of the memory budget it is spilled to per-tile files (buffer.py). At the
-end every tile is written once as a binary PCD with the input's fields and types, together with
-``index.json`` and Autoware's ``pointcloud_map_metadata.yaml`` (index.py), into a temporary
-directory that replaces OUT_DIR only when complete (atomic.py).
+Input PCDs are read chunk by chunk; each chunk is sorted by tile (grouping.py) on one of ``jobs``
+threads while the next is read (parallel.map_ahead) and buffered; when the buffer passes its share
+of the memory budget it is spilled to per-tile files (buffer.py). At the end every tile is written
+once as a binary PCD with the input's fields and types (one open, writev and close per tile, by
+``jobs`` forked writers), while this process writes ``index.json`` and Autoware's
+``pointcloud_map_metadata.yaml`` (index.py). All of it goes into a temporary directory that is
+flushed to disk with one syncfs and then replaces OUT_DIR (atomic.atomic_directory).
 
-Memory: ``memory_mb`` bounds the working set: about 30 % for decoding and sorting one chunk, 55 %
-for buffered points; the rest covers per-tile bookkeeping (about 1 kB per tile, so proportional to
-the map's area, not its point count).
-"""
+Memory: ``memory_mb`` bounds the working set: about 30 % for decoding and sorting the chunks in
+flight, 55 % for buffered points; the rest covers per-tile bookkeeping (about 1 kB per tile, so
+proportional to the map's area, not its point count)."""
 
 from __future__ import annotations
 
 import dataclasses
+import functools
+import itertools
 import os
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-
-from tqdm import tqdm
 
 from grid_puzzle_localization.atomic import atomic_directory, check_output_dir
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.grid import check_grid_size, tile_center, tile_filename
 from grid_puzzle_localization.pcd import PcdChunks, PcdHeader, iter_pcd_chunks, read_pcd_header
 from grid_puzzle_localization.pcd.reader import check_xyz
-from grid_puzzle_localization.tiling.buffer import TileBuffer, TileData, write_all
+from grid_puzzle_localization.tiling.buffer import TileBuffer, TileSet, write_all
 from grid_puzzle_localization.tiling.grouping import group_chunk
 from grid_puzzle_localization.tiling.index import TileEntry, TileIndex, write_autoware_metadata, write_index
-from grid_puzzle_localization.tiling.parallel import in_background
+from grid_puzzle_localization.tiling.parallel import in_background, map_ahead
 
 MIN_MEMORY_MB = 1.0
 _CHUNK_SHARE = 0.30
@@ -46,7 +47,8 @@ class TileConfig:
     memory_mb: float = 512.0  # working-set budget [MiB]
     force: bool = False  # replace a non-empty OUT_DIR
     progress: bool = True  # progress bars (only ever shown on a terminal)
-    processes: int = 2  # tile-writing processes (1 or 2; file creation is system-call bound)
+    jobs: int = 2  # grouping threads and tile-writing processes (file creation is system-call bound)
+    sync: bool = True  # flush the tiles to disk (one syncfs) before publishing OUT_DIR
 
 
 @dataclass
@@ -56,6 +58,7 @@ class TileResult:
     seconds: float  # whole run [s]
     seconds_stream: float  # reading, grouping and spilling [s]
     seconds_write: float  # writing tile files, index and metadata [s]
+    seconds_sync: float  # flushing to disk and publishing OUT_DIR [s]
 
 
 def check_inputs(paths: Sequence[Path]) -> list[PcdHeader]:
@@ -85,74 +88,135 @@ def tile_map(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, co
     check_output_dir(out_dir, config.force, paths)
     dtype = headers[0].dtype
     budget = config.memory_mb * 2**20
-    chunk_points = max(4096, int(budget * _CHUNK_SHARE / (2 * dtype.itemsize + _CHUNK_OVERHEAD_BYTES)))
+    jobs = max(1, config.jobs)
+    # Up to `jobs` chunks are grouped at once: they share the chunk part of the budget.
+    chunk_points = max(4096, int(budget * _CHUNK_SHARE / jobs / (2 * dtype.itemsize + _CHUNK_OVERHEAD_BYTES)))
     show = config.progress and sys.stderr.isatty()
-    with atomic_directory(out_dir) as tmp:
+    with atomic_directory(out_dir, durable=config.sync) as tmp:
         buffer = TileBuffer(dtype.itemsize, int(budget * _BUFFER_SHARE), tmp / ".spill")
-        read = _stream(paths, headers, buffer, s, chunk_points, show)
+        read = _stream(paths, headers, buffer, s, chunk_points, jobs, show)
         streamed = time.perf_counter()
-        tiles = list(buffer.drain())
-        names = [tile_filename(t.i, t.j, s) for t in tiles]
-        texts = _tile_headers(headers[0], tiles)
-        fork = config.processes > 1 and len(tiles) >= MIN_TILES_TO_FORK
-        with in_background(lambda: _write_tile_files(tiles, names, texts, tmp, show), fork):
-            index = _tile_index(s, headers[0], read, tiles, names, texts)
+        tiles = buffer.finish()
+        stats = tiles.stats
+        names = [tile_filename(i, j, s) for i, j in zip(stats["i"].tolist(), stats["j"].tolist(), strict=True)]
+        header = _TileHeader.like(headers[0])
+        fork = jobs > 1 and len(tiles) >= MIN_TILES_TO_FORK
+        writers = jobs if fork else 1
+        bounds = [len(tiles) * k // writers for k in range(writers + 1)]
+        writer_jobs = [
+            functools.partial(_write_tile_files, tiles, names, header, tmp, range(a, b), show and a == 0)
+            for a, b in itertools.pairwise(bounds)
+        ]
+        with in_background(writer_jobs, fork=fork):
+            index = _tile_index(s, headers[0], read, tiles, names, header)
             write_index(tmp, index)
             write_autoware_metadata(tmp, index)
         if buffer.spill_dir.exists():
             buffer.spill_dir.rmdir()
+        written = time.perf_counter()
     index.directory = out_dir
     end = time.perf_counter()
-    return TileResult(index, buffer.spills, end - start, streamed - start, end - streamed)
+    return TileResult(index, buffer.spills, end - start, streamed - start, written - streamed, end - written)
 
 
 def _stream(
-    paths: list[Path], headers: list[PcdHeader], buffer: TileBuffer, s: float, chunk_points: int, show: bool
+    paths: list[Path],
+    headers: list[PcdHeader],
+    buffer: TileBuffer,
+    s: float,
+    chunk_points: int,
+    threads: int,
+    show: bool,
 ) -> list[tuple[Path, PcdChunks]]:
-    """Reads every input chunk by chunk into the tile buffer; returns the spent chunk readers (counts)."""
+    """Reads every input chunk by chunk into the tile buffer, grouping chunks on ``threads`` threads
+    (in input order); returns the spent chunk readers (counts)."""
     read = []
-    with tqdm(total=sum(h.points for h in headers), unit="pt", unit_scale=True, disable=not show) as bar:
+    with _progress(show, total=sum(h.points for h in headers), unit="pt", unit_scale=True) as bar:
         for path in paths:
             bar.set_description(f"reading {path.name}")
             chunks = iter_pcd_chunks(path, chunk_points)
-            for chunk in chunks:
-                buffer.add(*group_chunk(chunk, s))
-                bar.update(len(chunk))
+            for records, groups in map_ahead(functools.partial(group_chunk, s=s), chunks, threads):
+                buffer.add(records, groups)
+                bar.update(len(records))
             bar.update(chunks.nonfinite_dropped)
             read.append((path, chunks))
     return read
 
 
-def _tile_headers(header: PcdHeader, tiles: list[TileData]) -> list[bytes]:
-    """Binary PCD header of each tile (the input's fields, the tile's point count)."""
-    empty = dataclasses.replace(header, data="binary", width=0, height=1, points=0).text()
-    return [
-        empty.replace("\nWIDTH 0\n", f"\nWIDTH {t.points}\n").replace("\nPOINTS 0\n", f"\nPOINTS {t.points}\n").encode()
-        for t in tiles
-    ]
+@dataclass(frozen=True)
+class _TileHeader:
+    """Binary PCD header of a tile of n points with the input's fields: fixed text around n, which
+    appears twice (WIDTH and POINTS). Each tile's header is formatted once, by its writer."""
+
+    before_width: str
+    before_points: str
+    after_points: str
+
+    @classmethod
+    def like(cls, header: PcdHeader) -> _TileHeader:
+        empty = dataclasses.replace(header, data="binary", width=0, height=1, points=0).text()
+        head, rest = empty.split("\nWIDTH 0\n")
+        middle, tail = rest.split("\nPOINTS 0\n")
+        return cls(f"{head}\nWIDTH ", f"\n{middle}\nPOINTS ", f"\n{tail}")
+
+    def of(self, n: int) -> bytes:
+        return f"{self.before_width}{n}{self.before_points}{n}{self.after_points}".encode()  # ASCII
+
+    def size(self, n: int) -> int:
+        """len(self.of(n)) without formatting it."""
+        return len(self.before_width) + len(self.before_points) + len(self.after_points) + 2 * len(str(n))
 
 
-def _write_tile_files(tiles: list[TileData], names: list[str], texts: list[bytes], directory: Path, show: bool) -> None:
-    """Creates the tile files in ``directory`` (itself atomic, so files are written in place)."""
+def _write_tile_files(
+    tiles: TileSet,
+    names: list[str],
+    header: _TileHeader,
+    directory: Path,
+    which: range,
+    show: bool,
+) -> None:
+    """Creates tile files ``which`` in ``directory`` (itself atomic, so files are written in place):
+    one open, one writev and one close each when the tile did not spill."""
+    counts = tiles.stats["count"].tolist()
     dir_fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)  # names resolve relative to it: no path work
     try:
-        for tile, name, text in tqdm(
-            zip(tiles, names, texts, strict=True), total=len(tiles), desc="writing tiles", unit="tile", disable=not show
-        ):
-            _write_tile(dir_fd, name, text, tile)
+        for t in _progress(show, which, desc=f"writing tiles {which.start}-{which.stop - 1}", unit="tile"):
+            fd = os.open(names[t], os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644, dir_fd=dir_fd)
+            try:
+                head = [header.of(counts[t])]
+                spill = tiles.spills[t]
+                if spill is not None:
+                    write_all(fd, head)
+                    _append_file(fd, spill)
+                    head = []
+                write_all(fd, head + tiles.parts(t))
+            finally:
+                os.close(fd)
     finally:
         os.close(dir_fd)
+
+
+def _append_file(fd: int, path: Path) -> None:
+    """Copies the file ``path`` to ``fd`` in the kernel, then deletes it."""
+    with open(path, "rb") as src:
+        size = os.fstat(src.fileno()).st_size
+        offset = 0
+        while offset < size:
+            offset += os.sendfile(fd, src.fileno(), offset, size - offset)
+    os.unlink(path)
 
 
 def _tile_index(
     s: float,
     header: PcdHeader,
     read: list[tuple[Path, PcdChunks]],
-    tiles: list[TileData],
+    tiles: TileSet,
     names: list[str],
-    texts: list[bytes],
+    tile_header: _TileHeader,
 ) -> TileIndex:
     record = header.record_bytes
+    stats = tiles.stats
+    columns = (stats[name].tolist() for name in ("i", "j", "count", "min", "max"))
     return TileIndex(
         grid_size=s,
         fields=[
@@ -160,7 +224,7 @@ def _tile_index(
             for n, z, t, c in zip(header.fields, header.sizes, header.types, header.counts, strict=True)
         ],
         record_bytes=record,
-        points=sum(t.points for t in tiles),
+        points=int(stats["count"].sum()),
         nonfinite_dropped=sum(c.nonfinite_dropped for _, c in read),
         inputs=[
             {
@@ -173,36 +237,42 @@ def _tile_index(
         ],
         tiles=[
             TileEntry(
-                key=(t.i, t.j),
+                key=(i, j),
                 stem=name[: -len(".pcd")],
                 file=name,
-                center=(tile_center(t.i, s), tile_center(t.j, s)),
-                points=t.points,
-                bounds={"min": t.bounds_min, "max": t.bounds_max},
-                bytes=len(text) + t.points * record,
-                data_bytes=t.points * record,
+                center=(tile_center(i, s), tile_center(j, s)),
+                points=n,
+                bounds={"min": low, "max": high},
+                bytes=tile_header.size(n) + n * record,
+                data_bytes=n * record,
             )
-            for t, name, text in zip(tiles, names, texts, strict=True)
+            for name, i, j, n, low, high in zip(names, *columns, strict=True)
         ],
     )
 
 
-def _write_tile(dir_fd: int, name: str, header: bytes, tile: TileData) -> None:
-    fd = os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644, dir_fd=dir_fd)
-    try:
-        head = [header]
-        if tile.spill is not None:
-            write_all(fd, head)
-            with open(tile.spill, "rb") as src:
-                size = os.fstat(src.fileno()).st_size
-                offset = 0
-                while offset < size:
-                    offset += os.sendfile(fd, src.fileno(), offset, size - offset)
-            os.unlink(tile.spill)
-            head = []
-        write_all(fd, head + tile.parts)
-    finally:
-        os.close(fd)
+def _progress(show: bool, iterable: Iterable | None = None, **options):
+    """A tqdm bar when ``show``; otherwise ``iterable`` itself, or a bar that shows nothing. tqdm is
+    imported only to show a bar: it adds 20 ms to every start-up."""
+    if show:
+        from tqdm import tqdm
+
+        return tqdm(iterable, **options)
+    return iterable if iterable is not None else _NoBar()
+
+
+class _NoBar:
+    def __enter__(self) -> _NoBar:
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        pass
+
+    def update(self, n: int = 1) -> None:
+        pass
+
+    def set_description(self, text: str) -> None:
+        pass
 
 
 def _describe(header: PcdHeader) -> str:
