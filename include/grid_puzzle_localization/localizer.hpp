@@ -9,7 +9,6 @@
 #include <string>
 
 #include "grid_puzzle_localization/map_update_worker.hpp"
-#include "grid_puzzle_localization/match_summary.hpp"
 #include "grid_puzzle_localization/ndt.hpp"
 #include "grid_puzzle_localization/point_cloud.hpp"
 #include "grid_puzzle_localization/pose_covariance.hpp"
@@ -71,9 +70,6 @@ struct LocalizerOutput {
   std::size_t target_points = 0;
   PointCloud aligned;  ///< map frame, when config.output_aligned and tracking
 };
-
-/// The diagnostics of `out`, with `target_update_ms` the last background update time [ms].
-MatchSummary summarize(const LocalizerOutput& out, double target_update_ms);
 
 class Localizer {
  public:

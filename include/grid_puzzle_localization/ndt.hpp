@@ -39,7 +39,7 @@ struct NdtConfig : VoxelMapParams {
 using Vector6d = Eigen::Matrix<double, 6, 1>;
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
-enum class NdtStatus {
+enum class NdtResultStatus {
   OK,                 ///< converged (step below transformation_epsilon)
   MAX_ITERATIONS,     ///< stopped at max_iterations; the pose is the last iterate and usually still usable
   EMPTY_TARGET,       ///< the target snapshot has no valid Gaussian
@@ -48,7 +48,7 @@ enum class NdtStatus {
   DEGENERATE,         ///< the match does not constrain all 6 DoF (e.g. one voxel); the pose is the guess
   INVALID_INPUT,      ///< non-finite guess, bad config, or a snapshot built with another resolution
 };
-const char* toString(NdtStatus status);
+const char* toString(NdtResultStatus status);
 
 /// Result of one alignment. All fields are finite whatever the status.
 struct NdtResult {
@@ -65,7 +65,7 @@ struct NdtResult {
   Matrix6d hessian = Matrix6d::Zero();
   double inlier_fraction = 0.0;   ///< source points whose best Gaussian is within chi2(3 dof, 99%) Mahalanobis
   std::size_t source_points = 0;  ///< finite source points used
-  NdtStatus status = NdtStatus::INVALID_INPUT;
+  NdtResultStatus status = NdtResultStatus::INVALID_INPUT;
   std::string message;  ///< empty when OK, else what went wrong and what to do
 };
 

@@ -60,24 +60,6 @@ const char* toString(LocalizerState state) {
   return "unknown";
 }
 
-MatchSummary summarize(const LocalizerOutput& out, double target_update_ms) {
-  MatchSummary s;
-  s.converged = out.ndt.converged;
-  s.match_accepted = out.match_accepted;
-  s.iterations = out.ndt.iterations;
-  s.score = out.ndt.score;
-  s.transformation_probability = out.ndt.transformation_probability;
-  s.nvtl = out.ndt.nvtl;
-  s.inlier_fraction = out.ndt.inlier_fraction;
-  s.align_ms = out.align_ms;
-  s.target_update_ms = target_update_ms;
-  s.target_voxels = out.target_voxels;
-  s.target_points = out.target_points;
-  s.source_points = out.ndt.source_points;
-  s.ndt_status = toString(out.ndt.status);
-  return s;
-}
-
 Localizer::Localizer(const LocalizerConfig& config)
     : config_(validated(config)), aligner_(config.ndt), worker_(workerParams(config)) {}
 
@@ -100,7 +82,7 @@ void Localizer::reset() {
 }
 
 bool Localizer::acceptable(const NdtResult& r) const {
-  if (r.status != NdtStatus::OK && r.status != NdtStatus::MAX_ITERATIONS) return false;
+  if (r.status != NdtResultStatus::OK && r.status != NdtResultStatus::MAX_ITERATIONS) return false;
   if (config_.require_converged && !r.converged) return false;
   if (r.nvtl < config_.min_nvtl) return false;
   if (r.transformation_probability < config_.min_transformation_probability) return false;

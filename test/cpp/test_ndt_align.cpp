@@ -49,7 +49,7 @@ TEST_P(NdtRecoversTransform, SixDofOnPlanesBoxesAndPoles) {
     cfg.transformation_epsilon = 1e-4;
     cfg.max_iterations = 60;
     const gpl::NdtResult r = alignScene(s, cfg);
-    ASSERT_EQ(r.status, gpl::NdtStatus::OK) << r.message;
+    ASSERT_EQ(r.status, gpl::NdtResultStatus::OK) << r.message;
     EXPECT_TRUE(r.converged);
     const auto [te, re] = gpl::synthetic::poseError(s.truth, r.transform.cast<double>());
     EXPECT_LT(te, 0.02) << "translation error [m]";
@@ -77,7 +77,7 @@ TEST(NdtAlign, FixedStepWithoutLineSearchAlsoConverges) {
   cfg.max_iterations = 100;
   const gpl::NdtResult r = alignScene(s, cfg);
   const auto [te, re] = gpl::synthetic::poseError(s.truth, r.transform.cast<double>());
-  ASSERT_EQ(r.status, gpl::NdtStatus::OK) << r.message;
+  ASSERT_EQ(r.status, gpl::NdtResultStatus::OK) << r.message;
   EXPECT_LT(te, 0.02);
   EXPECT_LT(re, 0.1);
 }
@@ -114,32 +114,32 @@ TEST(NdtAlign, DegenerateInputsGiveAnErrorStatusNotACrash) {
   const gpl::PointCloud scene = gpl::synthetic::scene(1, 0.02, 5000);
   gpl::NdtTarget empty(cfg);
   gpl::NdtResult r = aligner.align(*empty.snapshot(), scene, Eigen::Matrix4f::Identity());
-  EXPECT_EQ(r.status, gpl::NdtStatus::EMPTY_TARGET);
+  EXPECT_EQ(r.status, gpl::NdtResultStatus::EMPTY_TARGET);
   expectFinite(r);
 
   gpl::NdtTarget target(cfg);
   target.setTarget(scene);
   r = aligner.align(*target.snapshot(), gpl::PointCloud(scene.begin(), scene.begin() + 3), Eigen::Matrix4f::Identity());
-  EXPECT_EQ(r.status, gpl::NdtStatus::TOO_FEW_POINTS);
+  EXPECT_EQ(r.status, gpl::NdtResultStatus::TOO_FEW_POINTS);
   expectFinite(r);
 
   const float nan = std::numeric_limits<float>::quiet_NaN();
   gpl::PointCloud with_nan = {{nan, 0, 0}, {0, nan, 0}};
   r = aligner.align(*target.snapshot(), with_nan, Eigen::Matrix4f::Identity());
-  EXPECT_EQ(r.status, gpl::NdtStatus::TOO_FEW_POINTS);
+  EXPECT_EQ(r.status, gpl::NdtResultStatus::TOO_FEW_POINTS);
   expectFinite(r);
 
   Eigen::Matrix4f bad_guess = Eigen::Matrix4f::Identity();
   bad_guess(0, 3) = nan;
   r = aligner.align(*target.snapshot(), scene, bad_guess);
-  EXPECT_EQ(r.status, gpl::NdtStatus::INVALID_INPUT);
+  EXPECT_EQ(r.status, gpl::NdtResultStatus::INVALID_INPUT);
   EXPECT_TRUE(r.hessian.allFinite());
 
   // Far from the map: no correspondence.
   Eigen::Matrix4f far = Eigen::Matrix4f::Identity();
   far(0, 3) = 1000.0f;
   r = aligner.align(*target.snapshot(), scene, far);
-  EXPECT_EQ(r.status, gpl::NdtStatus::NO_CORRESPONDENCE);
+  EXPECT_EQ(r.status, gpl::NdtResultStatus::NO_CORRESPONDENCE);
   expectFinite(r);
 
   // All target and source points in one voxel: one Gaussian cannot pin down a 6-DoF pose.
@@ -151,7 +151,7 @@ TEST(NdtAlign, DegenerateInputsGiveAnErrorStatusNotACrash) {
   one_voxel.setTarget(blob);
   ASSERT_EQ(one_voxel.snapshot()->gaussianCount(), 1u);
   r = aligner.align(*one_voxel.snapshot(), blob, Eigen::Matrix4f::Identity());
-  EXPECT_EQ(r.status, gpl::NdtStatus::DEGENERATE);
+  EXPECT_EQ(r.status, gpl::NdtResultStatus::DEGENERATE);
   expectFinite(r);
   EXPECT_EQ(r.transform, Eigen::Matrix4f::Identity());
 
@@ -161,7 +161,7 @@ TEST(NdtAlign, DegenerateInputsGiveAnErrorStatusNotACrash) {
   gpl::NdtTarget coarse(other);
   coarse.setTarget(scene);
   r = aligner.align(*coarse.snapshot(), scene, Eigen::Matrix4f::Identity());
-  EXPECT_EQ(r.status, gpl::NdtStatus::INVALID_INPUT);
+  EXPECT_EQ(r.status, gpl::NdtResultStatus::INVALID_INPUT);
   EXPECT_NE(r.message.find("resolution"), std::string::npos);
 }
 
