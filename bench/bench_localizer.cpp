@@ -3,7 +3,8 @@
 // while a target update was pending, target update times and peak RSS. No ROS.
 //
 // Usage: bench_localizer INPUT.bin cloud|tiles [--tile-size S] [--window N] [--threads T] [--resolution R]
-//                        [--max-range M]
+//                        [--max-range M] [--trace FILE]
+// --trace writes one CSV row per scan (latency, NDT iterations, prediction and ground-truth errors) to FILE.
 // INPUT.bin (little endian) is written by bench/bench_localizer.py:
 //   char[8] "GPLBENCH"; f64 rate_hz; u64 n_map; f32 map[n_map][3]; f64 base_T_sensor[16] (row-major);
 //   u64 n_scans; then per scan: f64 stamp; f64 truth[16] (map_T_base, row-major); u64 n; f32 points[n][3]
@@ -113,6 +114,11 @@ double threadCpuMs() {
   return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
 }
 
+// Angle [rad] of the rotation between the orientations of a and b.
+double rotationAngle(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
+  return Eigen::AngleAxisd(a.linear().transpose() * b.linear()).angle();
+}
+
 double percentile(std::vector<double> v, double q) {
   if (v.empty()) return 0.0;
   std::sort(v.begin(), v.end());
@@ -128,7 +134,8 @@ int main(int argc, char** argv) {
   if (argc < 3) {
     std::fprintf(
         stderr,
-        "usage: %s INPUT.bin cloud|tiles [--tile-size S] [--window N] [--threads T] [--resolution R] [--max-range M]\n",
+        "usage: %s INPUT.bin cloud|tiles [--tile-size S] [--window N] [--threads T] [--resolution R] [--max-range M] "
+        "[--trace FILE]\n",
         argv[0]);
     return 2;
   }
@@ -141,6 +148,7 @@ int main(int argc, char** argv) {
   int half_window = 3;
   int threads = -1;  // -1: the LocalizerConfig default
   gpl::LocalizerConfig config;
+  std::string trace_path;
   for (int i = 3; i + 1 < argc; i += 2) {
     const std::string opt = argv[i];
     if (opt == "--tile-size")
@@ -153,6 +161,8 @@ int main(int argc, char** argv) {
       config.ndt.resolution = std::stod(argv[i + 1]);
     else if (opt == "--max-range")
       config.preprocess.max_range = std::stod(argv[i + 1]);
+    else if (opt == "--trace")
+      trace_path = argv[i + 1];
     else {
       std::fprintf(stderr, "bench_localizer: unknown option %s\n", opt.c_str());
       return 2;
@@ -198,6 +208,17 @@ int main(int argc, char** argv) {
   loc.map().waitIdle();
   loc.setInitialPose(input.scans.front().truth);
 
+  std::ofstream trace;
+  if (!trace_path.empty()) {
+    trace.open(trace_path);
+    if (!trace) {
+      std::fprintf(stderr, "bench_localizer: cannot write the trace file %s\n", trace_path.c_str());
+      return 2;
+    }
+    trace << "scan,stamp_s,scan_ms,align_ms,cpu_ms,iterations,evaluations,source_points,update_pending,prediction_to_"
+             "match_m,"
+             "prediction_to_match_rad,prediction_error_m,prediction_error_rad,error_m,error_rad,truth_yaw_rate_rad_s\n";
+  }
   std::vector<double> latency, latency_pending, latency_quiet, cpu, update_ms, errors;
   double first_scan_ms = 0.0;
   std::size_t rejected = 0;
@@ -217,6 +238,22 @@ int main(int argc, char** argv) {
       cpu.push_back(cpu_ms);
       latency.push_back(out.scan_ms);
       (out.map_update_pending || out.map_swapped ? latency_pending : latency_quiet).push_back(out.scan_ms);
+    }
+    if (trace.is_open()) {
+      const std::size_t i = static_cast<std::size_t>(&scan - input.scans.data());
+      const Scan& before = input.scans[i ? i - 1 : 0];
+      const double dt = scan.stamp - before.stamp;
+      const double yaw_rate =
+          dt > 0.0 ? Eigen::AngleAxisd(before.truth.linear().transpose() * scan.truth.linear()).angle() / dt : 0.0;
+      trace << i << ',' << scan.stamp << ',' << out.scan_ms << ',' << out.align_ms << ',' << cpu_ms << ','
+            << out.ndt.iterations << ',' << out.ndt.evaluations << ',' << out.ndt.source_points << ','
+            << (out.map_update_pending || out.map_swapped) << ','
+            << (out.prediction.translation() - out.pose.translation()).norm() << ','
+            << rotationAngle(out.prediction, out.pose) << ','
+            << (out.prediction.translation() - scan.truth.translation()).norm() << ','
+            << rotationAngle(out.prediction, scan.truth) << ','
+            << (out.pose.translation() - scan.truth.translation()).norm() << ',' << rotationAngle(out.pose, scan.truth)
+            << ',' << yaw_rate << '\n';
     }
     if (!out.match_accepted) ++rejected;
     errors.push_back((out.pose.translation() - scan.truth.translation()).norm());

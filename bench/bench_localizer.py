@@ -50,6 +50,7 @@ def main() -> int:
     parser.add_argument("--tile-size", type=float, default=10.0, help="tile side [m] (default 10)")
     parser.add_argument("--window", type=int, default=3, help="tiles on each side of the vehicle (default 3)")
     parser.add_argument("--threads", type=int, help="NDT OpenMP threads, 0 = all cores (default: the localizer's)")
+    parser.add_argument("--trace", type=Path, help="write per-scan CSV traces to DIR/<mode>.csv")
     workspace = Path(os.environ["GPL_WS"])  # exported by tools/env.sh (the Makefile sources it)
     parser.add_argument("--exe", type=Path, default=workspace / "devel/lib/grid_puzzle_localization/bench_localizer")
     args = parser.parse_args()
@@ -62,6 +63,9 @@ def main() -> int:
             cmd = [str(args.exe), str(data), mode, "--tile-size", str(args.tile_size), "--window", str(args.window)]
             if args.threads is not None:
                 cmd += ["--threads", str(args.threads)]
+            if args.trace is not None:
+                args.trace.mkdir(parents=True, exist_ok=True)
+                cmd += ["--trace", str(args.trace / f"{mode}.csv")]
             out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
             print(json.dumps({**json.loads(out), **hardware}), flush=True)
     return 0

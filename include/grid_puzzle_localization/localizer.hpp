@@ -56,6 +56,8 @@ struct LocalizerOutput {
   bool map_update_pending = false;  ///< a target update was queued or in progress when the scan started
   /// Valid when state == kTracking: map_T_base at the scan stamp, always finite.
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  /// The prediction the match started from (map_T_base); the initial pose on the first scan after one.
+  Eigen::Isometry3d prediction = Eigen::Isometry3d::Identity();
   Twist twist = Twist::Zero();             ///< body twist (base frame) [m/s, rad/s]
   Matrix6d covariance = Matrix6d::Zero();  ///< of (x y z roll pitch yaw) [m^2, rad^2]
   /// Of the twist: 2 * covariance / dt^2 for two independent poses dt apart; the max-std diagonal when the

@@ -54,7 +54,9 @@ const char* toString(NdtResultStatus status);
 struct NdtResult {
   Eigen::Matrix4f transform = Eigen::Matrix4f::Identity();  ///< T_target_source: maps source points into the target
   int iterations = 0;                                       ///< Newton iterations done
-  bool converged = false;                                   ///< status == OK
+  /// Passes over the source computing cost, gradient and Hessian (the initial one and every line-search trial).
+  int evaluations = 0;
+  bool converged = false;  ///< status == OK
   /// NDT cost: sum over source points and their Gaussians of d1 * exp(-d2/2 * mahalanobis^2), <= 0, lower is better.
   double score = 0.0;
   double transformation_probability = 0.0;  ///< -score / source points (Autoware's "transformation probability")

@@ -135,6 +135,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     guess = predictor_.predict(stamp, gyro_rotation ? &*gyro_rotation : nullptr);
   }
 
+  out.prediction = guess;
   const Clock::time_point align_start = Clock::now();
   out.ndt = aligner_.align(*target_, source, guess.cast<float>());
   out.align_ms = msSince(align_start);

@@ -397,8 +397,12 @@ NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, co
                        std::to_string(kMinSourcePoints) + " are needed");
 
   Evaluator ev(target, pts, config_);
+  auto evaluate = [&](const Vector6d& pose) {
+    ++r.evaluations;
+    return ev.evaluate(pose, true);
+  };
   Vector6d p = matrixToPose(guess.cast<double>());
-  NdtDerivatives D = ev.evaluate(p, true);
+  NdtDerivatives D = evaluate(p);
   if (ev.lastMatched() == 0)
     return failure(r, NdtResultStatus::NO_CORRESPONDENCE,
                    "no source point lies near a target voxel at the initial guess; check the guess and the map");
@@ -419,30 +423,34 @@ NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, co
       slope = -slope;
     }
     ++r.iterations;
-    double step = 0.0;
     if (slope == 0.0) {
       converged = true;
       break;
     }
-    if (config_.line_search) {
+    // At a positive definite Hessian a Newton step shorter than transformation_epsilon lands on the minimum of the
+    // local quadratic model, and the cost decrease it brings (second order in the step) is below the round-off of
+    // the float sums and the jumps where points change voxels. A line search cannot measure it: it kept shrinking
+    // such a step for up to max_evaluations passes over the scan and then took almost none of it. Take it whole.
+    const bool newton_converged = norm < config_.transformation_epsilon && isPositiveDefinite(D.hessian);
+    double step = 0.0;
+    if (config_.line_search && !newton_converged) {
       NdtDerivatives trial;
-      const double phi0 = D.cost;
       step = moreThuente(
           [&](double a, double* value, double* deriv) {
-            trial = ev.evaluate(p + a * dir, true);
+            trial = evaluate(p + a * dir);
             *value = trial.cost;
             *deriv = trial.gradient.dot(dir);
           },
-          phi0, slope, norm, 0.0, config_.step_size);
+          D.cost, slope, norm, 0.0, config_.step_size);
       D = trial;
     } else {
       step = std::min(norm, config_.step_size);
-      D = ev.evaluate(p + step * dir, true);
+      D = evaluate(p + step * dir);
     }
     p += step * dir;
     // A short step alone is not convergence: DIRECT searches can stall on a saddle or a ridge of the piecewise-
     // smooth cost, where the saddle-free step keeps going downhill. Require a positive definite Hessian too.
-    if (step < config_.transformation_epsilon && isPositiveDefinite(D.hessian)) {
+    if (newton_converged || (step < config_.transformation_epsilon && isPositiveDefinite(D.hessian))) {
       converged = true;
       break;
     }

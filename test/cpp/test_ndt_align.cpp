@@ -82,6 +82,40 @@ TEST(NdtAlign, FixedStepWithoutLineSearchAlsoConverges) {
   EXPECT_LT(re, 0.1);
 }
 
+// Tracking case: the guess is already within transformation_epsilon of the optimum, where the Newton step is exact
+// to second order and is taken whole (no line search): one iteration, two passes over the scan, landing on the
+// optimum found by a long run with a tiny epsilon (the reference). test_localizer checks the same on scans where a
+// line search used to spend up to 11 passes.
+TEST(NdtAlign, GuessWithinEpsilonTakesTheNewtonStepInTwoPasses) {
+  const Scene s = makeScene((gpl::Vector6d() << 0.2, -0.1, 0.03, 0.01, -0.02, 0.04).finished());
+  gpl::NdtConfig cfg;  // defaults: line search on, transformation_epsilon 0.01
+  gpl::NdtTarget target(cfg);
+  target.setTarget(s.target);
+  const gpl::NdtAligner aligner(cfg);
+  gpl::NdtConfig fine = cfg;
+  fine.transformation_epsilon = 1e-7;
+  fine.max_iterations = 100;
+  const gpl::NdtResult reference =
+      gpl::NdtAligner(fine).align(*target.snapshot(), s.source, Eigen::Matrix4f::Identity());
+  ASSERT_EQ(reference.status, gpl::NdtResultStatus::OK) << reference.message;
+  const gpl::Vector6d optimum = gpl::matrixToPose(reference.transform.cast<double>());
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  for (int trial = 0; trial < 10; ++trial) {
+    gpl::Vector6d offset;
+    for (int i = 0; i < 3; ++i) offset(i) = 0.003 * unit(rng);   // up to 3 mm per axis
+    for (int i = 3; i < 6; ++i) offset(i) = 0.0005 * unit(rng);  // up to 0.5 mrad per axis
+    const Eigen::Matrix4f guess = gpl::poseToMatrix(optimum + offset).cast<float>();
+    const gpl::NdtResult r = aligner.align(*target.snapshot(), s.source, guess);
+    ASSERT_EQ(r.status, gpl::NdtResultStatus::OK) << r.message;
+    EXPECT_EQ(r.iterations, 1);
+    EXPECT_EQ(r.evaluations, 2);  // at the guess and at the result
+    const auto [te, re] = gpl::synthetic::poseError(reference.transform.cast<double>(), r.transform.cast<double>());
+    EXPECT_LT(te, 0.5e-3) << "translation from the reference optimum [m]";
+    EXPECT_LT(re, 0.01) << "rotation from the reference optimum [deg]";
+  }
+}
+
 TEST(NdtAlign, ResultDoesNotDependOnThreadCount) {
   const Scene s = makeScene((gpl::Vector6d() << 0.4, -0.2, 0.05, 0.02, -0.01, 0.06).finished());
   for (const auto method : {gpl::NdtSearchMethod::DIRECT7, gpl::NdtSearchMethod::RADIUS}) {
