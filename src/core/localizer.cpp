@@ -3,6 +3,7 @@
 #include <chrono>
 #include <sstream>
 #include <stdexcept>
+#include <utility>
 
 namespace grid_puzzle_localization {
 namespace {
@@ -99,7 +100,8 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   last_stamp_ = stamp;
   out.map_update_pending = worker_.busy();
   if (std::shared_ptr<const VoxelMap> next = worker_.takeReady()) {
-    target_ = std::move(next);
+    // The old snapshot may hold the last reference to thousands of voxel buffers: the worker frees them.
+    worker_.retire(std::exchange(target_, std::move(next)));
     out.map_swapped = true;
   }
   if (target_) {
