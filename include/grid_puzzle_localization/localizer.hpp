@@ -101,6 +101,8 @@ class Localizer {
   bool acceptable(const NdtResult& r) const;
 
   LocalizerConfig config_;
+  Preprocessor preprocessor_;
+  PointCloud source_;  // the preprocessed scan in base_link, reused between scans
   NdtAligner aligner_;
   MapUpdateWorker worker_;
   std::shared_ptr<const VoxelMap> target_;

@@ -62,7 +62,10 @@ const char* toString(LocalizerState state) {
 }
 
 Localizer::Localizer(const LocalizerConfig& config)
-    : config_(validated(config)), aligner_(config.ndt), worker_(workerParams(config)) {}
+    : config_(validated(config)),
+      preprocessor_(config.preprocess),
+      aligner_(config.ndt),
+      worker_(workerParams(config)) {}
 
 void Localizer::setInitialPose(const Eigen::Isometry3d& map_T_base) { pending_initial_pose_ = map_T_base; }
 
@@ -125,9 +128,9 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   }
   out.state = LocalizerState::kTracking;
 
-  PointCloud source = preprocess(scan, config_.preprocess, &out.preprocess);
+  preprocessor_.apply(scan, source_, &out.preprocess);
   const Eigen::Isometry3f base_T_sensor_f = base_T_sensor.cast<float>();
-  for (Point& p : source) p = base_T_sensor_f * p;
+  for (Point& p : source_) p = base_T_sensor_f * p;
 
   Eigen::Isometry3d guess = predictor_.pose();
   if (!fresh) {
@@ -139,7 +142,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
 
   out.prediction = guess;
   const Clock::time_point align_start = Clock::now();
-  out.ndt = aligner_.align(*target_, source, guess.cast<float>());
+  out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
   out.align_ms = msSince(align_start);
 
   out.match_accepted = acceptable(out.ndt);
@@ -162,8 +165,8 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
                                                                   : predictionCovariance(config_.covariance);
   if (config_.output_aligned) {
     const Eigen::Isometry3f map_T_base = out.pose.cast<float>();
-    out.aligned.reserve(source.size());
-    for (const Point& p : source) out.aligned.push_back(map_T_base * p);
+    out.aligned.reserve(source_.size());
+    for (const Point& p : source_) out.aligned.push_back(map_T_base * p);
   }
   out.scan_ms = msSince(start);
   return out;
