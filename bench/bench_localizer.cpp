@@ -12,7 +12,6 @@
 // Scans are read one at a time between scan slots (outside the timed call), so peak RSS is the localizer's
 // and the map's, not the whole recording's. Gyro samples up to a scan's stamp are fed before it, as the
 // nodelet's IMU callback would.
-#include <sys/resource.h>
 #include <time.h>
 
 #include <algorithm>
@@ -135,6 +134,15 @@ double threadCpuMs() {
 // Angle [rad] of the rotation between the orientations of a and b.
 double rotationAngle(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
   return Eigen::AngleAxisd(a.linear().transpose() * b.linear()).angle();
+}
+
+// Peak resident set of this address space [MB] (VmHWM). getrusage's ru_maxrss would not do: Linux carries it
+// across execve, so it starts at the peak of the Python process that forked this one.
+double peakRssMb() {
+  std::ifstream status("/proc/self/status");
+  for (std::string line; std::getline(status, line);)
+    if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;  // the value is in kB
+  return 0.0;
 }
 
 double percentile(std::vector<double> v, double q) {
@@ -291,8 +299,6 @@ int main(int argc, char** argv) {
   loc.map().waitIdle();
   if (loc.map().stats().generation != generation) update_ms.push_back(loc.map().stats().update_ms);
 
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
   double mean_error = 0.0;
   for (double e : errors) mean_error += e / static_cast<double>(errors.size());
   std::printf(
@@ -311,6 +317,6 @@ int main(int argc, char** argv) {
       latency_pending.size(), percentile(latency_pending, 0.5), percentile(latency_quiet, 0.99), percentile(cpu, 0.5),
       percentile(cpu, 0.99), updates, percentile(update_ms, 0.5), percentile(update_ms, 1.0), rejected, mean_error,
       percentile(errors, 1.0), input.map.size(), tile_size, (2 * half_window + 1) * (2 * half_window + 1),
-      config.ndt.threads, config.map_update_threads, input.gyro.size(), static_cast<double>(usage.ru_maxrss) / 1024.0);
+      config.ndt.threads, config.map_update_threads, input.gyro.size(), peakRssMb());
   return 0;
 }
