@@ -3,11 +3,15 @@
 // while a target update was pending, target update times and peak RSS. No ROS.
 //
 // Usage: bench_localizer INPUT.bin cloud|tiles [--tile-size S] [--window N] [--threads T] [--resolution R]
-//                        [--max-range M]
+//                        [--max-range M] [--trace FILE]
+// --trace writes one CSV row per scan (latency, NDT iterations, prediction and ground-truth errors) to FILE.
 // INPUT.bin (little endian) is written by bench/bench_localizer.py:
 //   char[8] "GPLBENCH"; f64 rate_hz; u64 n_map; f32 map[n_map][3]; f64 base_T_sensor[16] (row-major);
+//   u64 n_imu; f64 imu[n_imu][4] (stamp, gyro x y z in base_link [rad/s]);
 //   u64 n_scans; then per scan: f64 stamp; f64 truth[16] (map_T_base, row-major); u64 n; f32 points[n][3]
-#include <sys/resource.h>
+// Scans are read one at a time between scan slots (outside the timed call), so peak RSS is the localizer's
+// and the map's, not the whole recording's. Gyro samples up to a scan's stamp are fed before it, as the
+// nodelet's IMU callback would.
 #include <time.h>
 
 #include <algorithm>
@@ -35,11 +39,18 @@ struct Scan {
   gpl::PointCloud points;
 };
 
+struct GyroSample {
+  double stamp = 0.0;
+  Eigen::Vector3d rate = Eigen::Vector3d::Zero();  ///< base frame [rad/s]
+};
+
 struct Input {
   double rate_hz = 10.0;
   gpl::PointCloud map;
   Eigen::Isometry3d base_T_sensor = Eigen::Isometry3d::Identity();
-  std::vector<Scan> scans;
+  std::vector<GyroSample> gyro;
+  std::uint64_t scans = 0;
+  std::ifstream rest;  ///< positioned at the first scan
 };
 
 template <class T>
@@ -65,24 +76,31 @@ Eigen::Isometry3d readPose(std::ifstream& in) {
   return Eigen::Isometry3d(m);
 }
 
-Input readInput(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
+void readInput(const std::string& path, Input& input) {
+  std::ifstream& in = input.rest;
+  in.open(path, std::ios::binary);
   if (!in) throw std::runtime_error("cannot open " + path);
   char magic[8];
   in.read(magic, 8);
   if (!in || std::memcmp(magic, "GPLBENCH", 8) != 0) throw std::runtime_error(path + " is not a bench input file");
-  Input input;
   input.rate_hz = readValue<double>(in);
   input.map = readCloud(in);
   input.base_T_sensor = readPose(in);
-  const auto n = readValue<std::uint64_t>(in);
-  input.scans.resize(n);
-  for (Scan& s : input.scans) {
-    s.stamp = readValue<double>(in);
-    s.truth = readPose(in);
-    s.points = readCloud(in);
+  input.gyro.resize(readValue<std::uint64_t>(in));
+  for (GyroSample& g : input.gyro) {
+    g.stamp = readValue<double>(in);
+    for (int k = 0; k < 3; ++k) g.rate(k) = readValue<double>(in);
   }
-  return input;
+  input.scans = readValue<std::uint64_t>(in);
+  if (input.scans == 0) throw std::runtime_error(path + " holds no scan");
+}
+
+Scan readScan(std::ifstream& in) {
+  Scan s;
+  s.stamp = readValue<double>(in);
+  s.truth = readPose(in);
+  s.points = readCloud(in);
+  return s;
 }
 
 using TileKey = std::pair<int, int>;
@@ -113,6 +131,20 @@ double threadCpuMs() {
   return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
 }
 
+// Angle [rad] of the rotation between the orientations of a and b.
+double rotationAngle(const Eigen::Isometry3d& a, const Eigen::Isometry3d& b) {
+  return Eigen::AngleAxisd(a.linear().transpose() * b.linear()).angle();
+}
+
+// Peak resident set of this address space [MB] (VmHWM). getrusage's ru_maxrss would not do: Linux carries it
+// across execve, so it starts at the peak of the Python process that forked this one.
+double peakRssMb() {
+  std::ifstream status("/proc/self/status");
+  for (std::string line; std::getline(status, line);)
+    if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;  // the value is in kB
+  return 0.0;
+}
+
 double percentile(std::vector<double> v, double q) {
   if (v.empty()) return 0.0;
   std::sort(v.begin(), v.end());
@@ -128,7 +160,8 @@ int main(int argc, char** argv) {
   if (argc < 3) {
     std::fprintf(
         stderr,
-        "usage: %s INPUT.bin cloud|tiles [--tile-size S] [--window N] [--threads T] [--resolution R] [--max-range M]\n",
+        "usage: %s INPUT.bin cloud|tiles [--tile-size S] [--window N] [--threads T] [--resolution R] [--max-range M] "
+        "[--trace FILE]\n",
         argv[0]);
     return 2;
   }
@@ -141,6 +174,7 @@ int main(int argc, char** argv) {
   int half_window = 3;
   int threads = -1;  // -1: the LocalizerConfig default
   gpl::LocalizerConfig config;
+  std::string trace_path;
   for (int i = 3; i + 1 < argc; i += 2) {
     const std::string opt = argv[i];
     if (opt == "--tile-size")
@@ -153,14 +187,18 @@ int main(int argc, char** argv) {
       config.ndt.resolution = std::stod(argv[i + 1]);
     else if (opt == "--max-range")
       config.preprocess.max_range = std::stod(argv[i + 1]);
+    else if (opt == "--trace")
+      trace_path = argv[i + 1];
     else {
       std::fprintf(stderr, "bench_localizer: unknown option %s\n", opt.c_str());
       return 2;
     }
   }
   Input input;
+  Scan scan;
   try {
-    input = readInput(argv[1]);
+    readInput(argv[1], input);
+    scan = readScan(input.rest);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_localizer: %s\n", e.what());
     return 2;
@@ -194,29 +232,60 @@ int main(int argc, char** argv) {
     ++updates;
   };
 
-  follow(input.scans.front().truth.translation());
+  follow(scan.truth.translation());
   loc.map().waitIdle();
-  loc.setInitialPose(input.scans.front().truth);
+  loc.setInitialPose(scan.truth);
 
+  std::ofstream trace;
+  if (!trace_path.empty()) {
+    trace.open(trace_path);
+    if (!trace) {
+      std::fprintf(stderr, "bench_localizer: cannot write the trace file %s\n", trace_path.c_str());
+      return 2;
+    }
+    trace << "scan,stamp_s,scan_ms,align_ms,cpu_ms,iterations,evaluations,source_points,update_pending,"
+             "prediction_to_match_m,prediction_to_match_rad,prediction_error_m,prediction_error_rad,error_m,error_rad,"
+             "truth_yaw_rate_rad_s\n";
+  }
   std::vector<double> latency, latency_pending, latency_quiet, cpu, update_ms, errors;
   double first_scan_ms = 0.0;
   std::size_t rejected = 0;
   std::uint64_t generation = loc.map().stats().generation;
   const auto period = std::chrono::duration<double>(1.0 / input.rate_hz);
   auto next = std::chrono::steady_clock::now();
-  for (const Scan& scan : input.scans) {
+  std::size_t gyro_fed = 0;
+  Eigen::Isometry3d last_truth = scan.truth;
+  for (std::uint64_t i = 0; i < input.scans; ++i) {
+    if (i > 0) {
+      last_truth = scan.truth;
+      scan = readScan(input.rest);
+    }
+    for (; gyro_fed < input.gyro.size() && input.gyro[gyro_fed].stamp <= scan.stamp; ++gyro_fed)
+      loc.addGyro(input.gyro[gyro_fed].stamp, input.gyro[gyro_fed].rate);
     std::this_thread::sleep_until(next);
     next += std::chrono::duration_cast<std::chrono::steady_clock::duration>(period);
     const double cpu_start = threadCpuMs();
     const gpl::LocalizerOutput out = loc.processScan(scan.stamp, scan.points, input.base_T_sensor);
     const double cpu_ms = threadCpuMs() - cpu_start;
     // The first scan swaps in the initial map and converges from the initial pose: reported on its own.
-    if (&scan == &input.scans.front()) {
+    if (i == 0) {
       first_scan_ms = out.scan_ms;
     } else {
       cpu.push_back(cpu_ms);
       latency.push_back(out.scan_ms);
       (out.map_update_pending || out.map_swapped ? latency_pending : latency_quiet).push_back(out.scan_ms);
+    }
+    if (trace.is_open()) {
+      const double yaw_rate = i > 0 ? rotationAngle(last_truth, scan.truth) * input.rate_hz : 0.0;
+      trace << i << ',' << scan.stamp << ',' << out.scan_ms << ',' << out.align_ms << ',' << cpu_ms << ','
+            << out.ndt.iterations << ',' << out.ndt.evaluations << ',' << out.ndt.source_points << ','
+            << (out.map_update_pending || out.map_swapped) << ','
+            << (out.prediction.translation() - out.pose.translation()).norm() << ','
+            << rotationAngle(out.prediction, out.pose) << ','
+            << (out.prediction.translation() - scan.truth.translation()).norm() << ','
+            << rotationAngle(out.prediction, scan.truth) << ','
+            << (out.pose.translation() - scan.truth.translation()).norm() << ',' << rotationAngle(out.pose, scan.truth)
+            << ',' << yaw_rate << '\n';
     }
     if (!out.match_accepted) ++rejected;
     errors.push_back((out.pose.translation() - scan.truth.translation()).norm());
@@ -230,8 +299,6 @@ int main(int argc, char** argv) {
   loc.map().waitIdle();
   if (loc.map().stats().generation != generation) update_ms.push_back(loc.map().stats().update_ms);
 
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
   double mean_error = 0.0;
   for (double e : errors) mean_error += e / static_cast<double>(errors.size());
   std::printf(
@@ -243,12 +310,13 @@ int main(int argc, char** argv) {
       "\"target_updates\": %zu, "
       "\"target_update_ms\": {\"median\": %.1f, \"max\": %.1f}, \"rejected_matches\": %zu, "
       "\"translation_error_m\": {\"mean\": %.4f, \"max\": %.4f}, \"map_points\": %zu, \"tile_size_m\": %.1f, "
-      "\"window_tiles\": %d, \"ndt_threads\": %d, \"map_update_threads\": %d, \"peak_rss_mb\": %.1f}\n",
-      mode.c_str(), input.scans.size(), first_scan_ms, percentile(latency, 0.5), percentile(latency, 0.95),
-      percentile(latency, 0.99), percentile(latency, 1.0), percentile(latency_pending, 1.0), latency_pending.size(),
-      percentile(latency_pending, 0.5), percentile(latency_quiet, 0.99), percentile(cpu, 0.5), percentile(cpu, 0.99),
-      updates, percentile(update_ms, 0.5), percentile(update_ms, 1.0), rejected, mean_error, percentile(errors, 1.0),
-      input.map.size(), tile_size, (2 * half_window + 1) * (2 * half_window + 1), config.ndt.threads,
-      config.map_update_threads, static_cast<double>(usage.ru_maxrss) / 1024.0);
+      "\"window_tiles\": %d, \"ndt_threads\": %d, \"map_update_threads\": %d, \"gyro_samples\": %zu, "
+      "\"peak_rss_mb\": %.1f}\n",
+      mode.c_str(), static_cast<std::size_t>(input.scans), first_scan_ms, percentile(latency, 0.5),
+      percentile(latency, 0.95), percentile(latency, 0.99), percentile(latency, 1.0), percentile(latency_pending, 1.0),
+      latency_pending.size(), percentile(latency_pending, 0.5), percentile(latency_quiet, 0.99), percentile(cpu, 0.5),
+      percentile(cpu, 0.99), updates, percentile(update_ms, 0.5), percentile(update_ms, 1.0), rejected, mean_error,
+      percentile(errors, 1.0), input.map.size(), tile_size, (2 * half_window + 1) * (2 * half_window + 1),
+      config.ndt.threads, config.map_update_threads, input.gyro.size(), peakRssMb());
   return 0;
 }

@@ -1,6 +1,6 @@
 """`make bench-localizer`: a synthetic drive (grid_puzzle_localization.synthetic_scene) through the core
-localizer without roscore. Writes the scans and the map to a temporary input file, runs the C++
-bench_localizer once per map mode (cloud: the merged window rebuilt per change; tiles: incremental deltas)
+localizer without roscore. Writes the scans, the gyro samples and the map to a temporary input file, runs the
+C++ bench_localizer once per map mode (cloud: the merged window rebuilt per change; tiles: incremental deltas)
 and prints one JSON line per mode, with the machine it ran on."""
 
 from __future__ import annotations
@@ -27,8 +27,14 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
-def write_input(path: Path, drive: ss.Drive, seed: int) -> None:
-    scene = ss.make_scene()
+# White noise of the simulated gyro [rad/s], about a MEMS IMU's at 100 Hz.
+GYRO_NOISE = 0.002
+
+
+def write_input(path: Path, drive: ss.Drive, imu_rate: float, seed: int) -> None:
+    """The C++ program's input (format in bench_localizer.cpp). The street runs 40 m past the end of the
+    drive; ``imu_rate`` [Hz] of gyro samples over the whole drive, 0 for none."""
+    scene = ss.make_scene(length=drive.x0 + drive.speed * drive.duration + 40.0)
     rng = np.random.default_rng(seed)
     with path.open("wb") as f:
         f.write(b"GPLBENCH")
@@ -36,6 +42,9 @@ def write_input(path: Path, drive: ss.Drive, seed: int) -> None:
         cloud = ss.sample_map(scene)
         f.write(np.uint64(len(cloud)).tobytes() + cloud.tobytes())
         f.write(ss.lidar_mount().astype(np.float64).tobytes())
+        imu_t = np.arange(0.0, drive.duration, 1.0 / imu_rate) if imu_rate > 0 else np.zeros(0)
+        gyro = drive.angular_velocity(imu_t) + rng.normal(0.0, GYRO_NOISE, size=(imu_t.size, 3))
+        f.write(np.uint64(imu_t.size).tobytes() + np.column_stack([imu_t, gyro]).astype(np.float64).tobytes())
         f.write(np.uint64(len(drive.stamps)).tobytes())
         for t in drive.stamps:
             pose = drive.pose(float(t))
@@ -46,10 +55,12 @@ def write_input(path: Path, drive: ss.Drive, seed: int) -> None:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--duration", type=float, default=15.0, help="drive length [s] at 10 Hz (default 15)")
+    parser.add_argument("--duration", type=float, default=60.0, help="drive length [s] at 10 Hz (default 60)")
+    parser.add_argument("--imu-rate", type=float, default=100.0, help="gyro samples [Hz], 0 = no IMU (default 100)")
     parser.add_argument("--tile-size", type=float, default=10.0, help="tile side [m] (default 10)")
     parser.add_argument("--window", type=int, default=3, help="tiles on each side of the vehicle (default 3)")
     parser.add_argument("--threads", type=int, help="NDT OpenMP threads, 0 = all cores (default: the localizer's)")
+    parser.add_argument("--trace", type=Path, help="write per-scan CSV traces to DIR/<mode>.csv")
     workspace = Path(os.environ["GPL_WS"])  # exported by tools/env.sh (the Makefile sources it)
     parser.add_argument("--exe", type=Path, default=workspace / "devel/lib/grid_puzzle_localization/bench_localizer")
     args = parser.parse_args()
@@ -57,11 +68,14 @@ def main() -> int:
     hardware = {"cpu_model": cpu_model(), "cores": os.cpu_count(), "load_average_1min": os.getloadavg()[0]}
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp) / "drive.bin"
-        write_input(data, ss.Drive(duration=args.duration), seed=1)
+        write_input(data, ss.Drive(duration=args.duration), args.imu_rate, seed=1)
         for mode in ("cloud", "tiles"):
             cmd = [str(args.exe), str(data), mode, "--tile-size", str(args.tile_size), "--window", str(args.window)]
             if args.threads is not None:
                 cmd += ["--threads", str(args.threads)]
+            if args.trace is not None:
+                args.trace.mkdir(parents=True, exist_ok=True)
+                cmd += ["--trace", str(args.trace / f"{mode}.csv")]
             out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
             print(json.dumps({**json.loads(out), **hardware}), flush=True)
     return 0

@@ -9,7 +9,6 @@
 #include <string>
 
 #include "grid_puzzle_localization/map_update_worker.hpp"
-#include "grid_puzzle_localization/match_summary.hpp"
 #include "grid_puzzle_localization/ndt.hpp"
 #include "grid_puzzle_localization/point_cloud.hpp"
 #include "grid_puzzle_localization/pose_covariance.hpp"
@@ -57,6 +56,8 @@ struct LocalizerOutput {
   bool map_update_pending = false;  ///< a target update was queued or in progress when the scan started
   /// Valid when state == kTracking: map_T_base at the scan stamp, always finite.
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  /// The prediction the match started from (map_T_base); the initial pose on the first scan after one.
+  Eigen::Isometry3d prediction = Eigen::Isometry3d::Identity();
   Twist twist = Twist::Zero();             ///< body twist (base frame) [m/s, rad/s]
   Matrix6d covariance = Matrix6d::Zero();  ///< of (x y z roll pitch yaw) [m^2, rad^2]
   /// Of the twist: 2 * covariance / dt^2 for two independent poses dt apart; the max-std diagonal when the
@@ -71,9 +72,6 @@ struct LocalizerOutput {
   std::size_t target_points = 0;
   PointCloud aligned;  ///< map frame, when config.output_aligned and tracking
 };
-
-/// The diagnostics of `out`, with `target_update_ms` the last background update time [ms].
-MatchSummary summarize(const LocalizerOutput& out, double target_update_ms);
 
 class Localizer {
  public:
@@ -103,6 +101,8 @@ class Localizer {
   bool acceptable(const NdtResult& r) const;
 
   LocalizerConfig config_;
+  Preprocessor preprocessor_;
+  PointCloud source_;  // the preprocessed scan in base_link, reused between scans
   NdtAligner aligner_;
   MapUpdateWorker worker_;
   std::shared_ptr<const VoxelMap> target_;

@@ -67,9 +67,14 @@ class MapUpdateWorker {
   /// practice (an atomic shared_ptr exchange); a caller keeps the previous snapshot until it gets one.
   std::shared_ptr<const VoxelMap> takeReady();
 
+  /// Hands a snapshot the caller is done with to the worker thread, which drops it there: freeing an old map
+  /// (its voxel buffers) is background work, not the scan thread's. Thread-safe, returns at once.
+  void retire(std::shared_ptr<const VoxelMap> snapshot);
+
   /// True while changes are queued or being applied. Thread-safe.
   bool busy() const;
-  /// Blocks until no change is queued or in progress (tests, benchmark, offline use).
+  /// Blocks until no change is queued or in progress and every retired snapshot has been dropped (tests,
+  /// benchmark, offline use).
   void waitIdle();
   MapUpdateStats stats() const;
   /// Errors of changes that failed (unreadable PCD file, ...) since the last call, oldest first.
@@ -83,7 +88,9 @@ class MapUpdateWorker {
   std::condition_variable wake_;
   std::condition_variable idle_;
   std::deque<MapChange> queue_;
-  bool working_ = false;
+  std::vector<std::shared_ptr<const VoxelMap>> retired_;
+  bool working_ = false;    // a batch of changes is being applied
+  bool releasing_ = false;  // retired snapshots are being dropped
   bool stop_ = false;
   MapUpdateStats stats_;
   std::vector<std::string> errors_;

@@ -39,7 +39,7 @@ struct NdtConfig : VoxelMapParams {
 using Vector6d = Eigen::Matrix<double, 6, 1>;
 using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
-enum class NdtStatus {
+enum class NdtResultStatus {
   OK,                 ///< converged (step below transformation_epsilon)
   MAX_ITERATIONS,     ///< stopped at max_iterations; the pose is the last iterate and usually still usable
   EMPTY_TARGET,       ///< the target snapshot has no valid Gaussian
@@ -48,13 +48,15 @@ enum class NdtStatus {
   DEGENERATE,         ///< the match does not constrain all 6 DoF (e.g. one voxel); the pose is the guess
   INVALID_INPUT,      ///< non-finite guess, bad config, or a snapshot built with another resolution
 };
-const char* toString(NdtStatus status);
+const char* toString(NdtResultStatus status);
 
 /// Result of one alignment. All fields are finite whatever the status.
 struct NdtResult {
   Eigen::Matrix4f transform = Eigen::Matrix4f::Identity();  ///< T_target_source: maps source points into the target
   int iterations = 0;                                       ///< Newton iterations done
-  bool converged = false;                                   ///< status == OK
+  /// Passes over the source computing cost, gradient and Hessian (the initial one and every line-search trial).
+  int evaluations = 0;
+  bool converged = false;  ///< status == OK
   /// NDT cost: sum over source points and their Gaussians of d1 * exp(-d2/2 * mahalanobis^2), <= 0, lower is better.
   double score = 0.0;
   double transformation_probability = 0.0;  ///< -score / source points (Autoware's "transformation probability")
@@ -65,7 +67,7 @@ struct NdtResult {
   Matrix6d hessian = Matrix6d::Zero();
   double inlier_fraction = 0.0;   ///< source points whose best Gaussian is within chi2(3 dof, 99%) Mahalanobis
   std::size_t source_points = 0;  ///< finite source points used
-  NdtStatus status = NdtStatus::INVALID_INPUT;
+  NdtResultStatus status = NdtResultStatus::INVALID_INPUT;
   std::string message;  ///< empty when OK, else what went wrong and what to do
 };
 

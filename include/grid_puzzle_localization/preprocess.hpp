@@ -2,7 +2,9 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include "grid_puzzle_localization/point_cloud.hpp"
 
@@ -25,12 +27,45 @@ struct PreprocessReport {
   std::size_t output = 0;        ///< points returned
 };
 
-/// Filters `input` (sensor frame, metres) into a new cloud. The voxel filter replaces the points of
-/// each occupied world-aligned voxel by their centroid, in order of first appearance, so the result is
-/// deterministic. Throws std::invalid_argument when `config` does not validate.
+/// Centroid voxel filter: the points of each occupied world-aligned voxel (leaf in metres) are replaced by
+/// their centroid, in order of first appearance, so the result is deterministic. Its hash table and sums
+/// are kept between calls, so a steady stream of scans allocates nothing. Not thread-safe.
+class VoxelCentroidFilter {
+ public:
+  /// Filters `input` into `out` (its previous content is replaced; not `input` itself). Throws
+  /// std::invalid_argument unless leaf > 0.
+  void apply(const PointCloud& input, double leaf, PointCloud& out);
+
+ private:
+  struct Slot {
+    std::int32_t x, y, z;
+    std::int32_t voxel;  ///< index into sums_/counts_, -1 = empty
+  };
+  std::vector<Slot> slots_;  ///< open addressing, power-of-two size, load <= 0.5; all empty between calls
+  std::vector<std::size_t> used_slots_;
+  std::vector<Eigen::Vector3d> sums_;
+  std::vector<std::size_t> counts_;
+};
+
+/// Preprocessing of a stream of scans with buffers reused between scans (scan thread only).
+class Preprocessor {
+ public:
+  /// Throws std::invalid_argument when `config` does not validate.
+  explicit Preprocessor(const PreprocessConfig& config);
+  /// Filters `input` (sensor frame, metres) into `out` (its previous content is replaced; not `input` itself).
+  void apply(const PointCloud& input, PointCloud& out, PreprocessReport* report = nullptr);
+
+ private:
+  PreprocessConfig config_;
+  PointCloud kept_;
+  VoxelCentroidFilter voxel_filter_;
+};
+
+/// One-off preprocessing into a new cloud (Preprocessor with fresh buffers). Throws std::invalid_argument when
+/// `config` does not validate.
 PointCloud preprocess(const PointCloud& input, const PreprocessConfig& config, PreprocessReport* report = nullptr);
 
-/// Centroid voxel filter alone (leaf in metres, > 0).
+/// One-off centroid voxel filter (leaf in metres, > 0).
 PointCloud voxelDownsample(const PointCloud& input, double leaf);
 
 }  // namespace grid_puzzle_localization

@@ -3,6 +3,7 @@
 #include <chrono>
 #include <sstream>
 #include <stdexcept>
+#include <utility>
 
 namespace grid_puzzle_localization {
 namespace {
@@ -60,26 +61,11 @@ const char* toString(LocalizerState state) {
   return "unknown";
 }
 
-MatchSummary summarize(const LocalizerOutput& out, double target_update_ms) {
-  MatchSummary s;
-  s.converged = out.ndt.converged;
-  s.match_accepted = out.match_accepted;
-  s.iterations = out.ndt.iterations;
-  s.score = out.ndt.score;
-  s.transformation_probability = out.ndt.transformation_probability;
-  s.nvtl = out.ndt.nvtl;
-  s.inlier_fraction = out.ndt.inlier_fraction;
-  s.align_ms = out.align_ms;
-  s.target_update_ms = target_update_ms;
-  s.target_voxels = out.target_voxels;
-  s.target_points = out.target_points;
-  s.source_points = out.ndt.source_points;
-  s.ndt_status = toString(out.ndt.status);
-  return s;
-}
-
 Localizer::Localizer(const LocalizerConfig& config)
-    : config_(validated(config)), aligner_(config.ndt), worker_(workerParams(config)) {}
+    : config_(validated(config)),
+      preprocessor_(config.preprocess),
+      aligner_(config.ndt),
+      worker_(workerParams(config)) {}
 
 void Localizer::setInitialPose(const Eigen::Isometry3d& map_T_base) { pending_initial_pose_ = map_T_base; }
 
@@ -100,7 +86,7 @@ void Localizer::reset() {
 }
 
 bool Localizer::acceptable(const NdtResult& r) const {
-  if (r.status != NdtStatus::OK && r.status != NdtStatus::MAX_ITERATIONS) return false;
+  if (r.status != NdtResultStatus::OK && r.status != NdtResultStatus::MAX_ITERATIONS) return false;
   if (config_.require_converged && !r.converged) return false;
   if (r.nvtl < config_.min_nvtl) return false;
   if (r.transformation_probability < config_.min_transformation_probability) return false;
@@ -117,7 +103,8 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   last_stamp_ = stamp;
   out.map_update_pending = worker_.busy();
   if (std::shared_ptr<const VoxelMap> next = worker_.takeReady()) {
-    target_ = std::move(next);
+    // The old snapshot may hold the last reference to thousands of voxel buffers: the worker frees them.
+    worker_.retire(std::exchange(target_, std::move(next)));
     out.map_swapped = true;
   }
   if (target_) {
@@ -141,9 +128,9 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   }
   out.state = LocalizerState::kTracking;
 
-  PointCloud source = preprocess(scan, config_.preprocess, &out.preprocess);
+  preprocessor_.apply(scan, source_, &out.preprocess);
   const Eigen::Isometry3f base_T_sensor_f = base_T_sensor.cast<float>();
-  for (Point& p : source) p = base_T_sensor_f * p;
+  for (Point& p : source_) p = base_T_sensor_f * p;
 
   Eigen::Isometry3d guess = predictor_.pose();
   if (!fresh) {
@@ -153,8 +140,9 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     guess = predictor_.predict(stamp, gyro_rotation ? &*gyro_rotation : nullptr);
   }
 
+  out.prediction = guess;
   const Clock::time_point align_start = Clock::now();
-  out.ndt = aligner_.align(*target_, source, guess.cast<float>());
+  out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
   out.align_ms = msSince(align_start);
 
   out.match_accepted = acceptable(out.ndt);
@@ -177,8 +165,8 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
                                                                   : predictionCovariance(config_.covariance);
   if (config_.output_aligned) {
     const Eigen::Isometry3f map_T_base = out.pose.cast<float>();
-    out.aligned.reserve(source.size());
-    for (const Point& p : source) out.aligned.push_back(map_T_base * p);
+    out.aligned.reserve(source_.size());
+    for (const Point& p : source_) out.aligned.push_back(map_T_base * p);
   }
   out.scan_ms = msSince(start);
   return out;

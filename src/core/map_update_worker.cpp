@@ -57,6 +57,15 @@ std::shared_ptr<const VoxelMap> MapUpdateWorker::takeReady() {
   return std::atomic_exchange(&ready_, std::shared_ptr<const VoxelMap>());
 }
 
+void MapUpdateWorker::retire(std::shared_ptr<const VoxelMap> snapshot) {
+  if (!snapshot) return;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    retired_.push_back(std::move(snapshot));
+  }
+  wake_.notify_one();
+}
+
 bool MapUpdateWorker::busy() const {
   std::lock_guard<std::mutex> lock(mutex_);
   return working_ || !queue_.empty();
@@ -64,7 +73,7 @@ bool MapUpdateWorker::busy() const {
 
 void MapUpdateWorker::waitIdle() {
   std::unique_lock<std::mutex> lock(mutex_);
-  idle_.wait(lock, [this] { return !working_ && queue_.empty(); });
+  idle_.wait(lock, [this] { return !working_ && !releasing_ && queue_.empty() && retired_.empty(); });
 }
 
 MapUpdateStats MapUpdateWorker::stats() const {
@@ -117,40 +126,52 @@ void MapUpdateWorker::run() {
   NdtTarget target(params_);
   std::unique_lock<std::mutex> lock(mutex_);
   for (;;) {
-    wake_.wait(lock, [this] { return stop_ || !queue_.empty(); });
+    wake_.wait(lock, [this] { return stop_ || !queue_.empty() || !retired_.empty(); });
     if (stop_) return;
     std::deque<MapChange> batch;
     batch.swap(queue_);
-    working_ = true;
+    std::vector<std::shared_ptr<const VoxelMap>> retired;
+    retired.swap(retired_);
+    working_ = !batch.empty();
+    releasing_ = !retired.empty();
     lock.unlock();
 
-    const auto start = std::chrono::steady_clock::now();
+    // Old snapshots the scan thread handed back are freed here (when no other holder is left).
+    retired.clear();
+    std::shared_ptr<const VoxelMap> snapshot;
     std::vector<std::string> failures;
-    for (const MapChange& change : batch) {
-      try {
-        apply(target, change);
-      } catch (const std::exception& e) {
-        failures.emplace_back(e.what());
+    double ms = 0.0;
+    if (!batch.empty()) {
+      const auto start = std::chrono::steady_clock::now();
+      for (const MapChange& change : batch) {
+        try {
+          apply(target, change);
+        } catch (const std::exception& e) {
+          failures.emplace_back(e.what());
+        }
       }
+      snapshot = target.snapshot();
+      ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+      std::atomic_store(&ready_, snapshot);
     }
-    std::shared_ptr<const VoxelMap> snapshot = target.snapshot();
-    const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    std::atomic_store(&ready_, snapshot);
 
     lock.lock();
-    ++stats_.generation;
-    stats_.update_ms = ms;
-    stats_.changes = batch.size();
-    stats_.tiles = tile_ids_.size();
-    stats_.voxels = snapshot->gaussianCount();
-    stats_.points = snapshot->pointCount();
-    errors_.insert(errors_.end(), failures.begin(), failures.end());
-    working_ = !queue_.empty();
-    if (!working_) idle_.notify_all();
-    // Freeing the old batch (large clouds) is the worker's job, not the scan thread's.
+    if (snapshot) {
+      ++stats_.generation;
+      stats_.update_ms = ms;
+      stats_.changes = batch.size();
+      stats_.tiles = tile_ids_.size();
+      stats_.voxels = snapshot->gaussianCount();
+      stats_.points = snapshot->pointCount();
+      errors_.insert(errors_.end(), failures.begin(), failures.end());
+    }
+    working_ = false;
+    releasing_ = false;
+    // Freeing the applied batch (large clouds) is the worker's job, not the scan thread's.
     lock.unlock();
     batch.clear();
     lock.lock();
+    if (queue_.empty() && retired_.empty()) idle_.notify_all();
   }
 }
 

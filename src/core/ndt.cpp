@@ -355,7 +355,7 @@ Vector6d newtonStep(const NdtDerivatives& D) {
 
 bool isPositiveDefinite(const Matrix6d& H) { return Eigen::LLT<Matrix6d>(H).info() == Eigen::Success; }
 
-NdtResult failure(NdtResult r, NdtStatus status, const std::string& message) {
+NdtResult failure(NdtResult r, NdtResultStatus status, const std::string& message) {
   r.status = status;
   r.message = message;
   r.converged = false;
@@ -379,28 +379,32 @@ NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, co
   NdtResult r;
   const PointCloud pts = finitePoints(source);
   r.source_points = pts.size();
-  if (!guess.allFinite()) return failure(r, NdtStatus::INVALID_INPUT, "the initial guess has non-finite entries");
+  if (!guess.allFinite()) return failure(r, NdtResultStatus::INVALID_INPUT, "the initial guess has non-finite entries");
   r.transform = guess;
   if (target.resolution() != config_.resolution) {
     std::ostringstream msg;
     msg << "the target was built with resolution " << target.resolution() << " m but the aligner uses "
         << config_.resolution << " m; build the NdtTarget from the same NdtConfig";
-    return failure(r, NdtStatus::INVALID_INPUT, msg.str());
+    return failure(r, NdtResultStatus::INVALID_INPUT, msg.str());
   }
   if (target.gaussianCount() == 0)
-    return failure(r, NdtStatus::EMPTY_TARGET,
+    return failure(r, NdtResultStatus::EMPTY_TARGET,
                    "the target has no voxel with at least " + std::to_string(target.params().min_points_per_voxel) +
                        " points; load map points around the pose first");
   if (pts.size() < kMinSourcePoints)
-    return failure(r, NdtStatus::TOO_FEW_POINTS,
+    return failure(r, NdtResultStatus::TOO_FEW_POINTS,
                    "the source has " + std::to_string(pts.size()) + " finite points, at least " +
                        std::to_string(kMinSourcePoints) + " are needed");
 
   Evaluator ev(target, pts, config_);
+  auto evaluate = [&](const Vector6d& pose) {
+    ++r.evaluations;
+    return ev.evaluate(pose, true);
+  };
   Vector6d p = matrixToPose(guess.cast<double>());
-  NdtDerivatives D = ev.evaluate(p, true);
+  NdtDerivatives D = evaluate(p);
   if (ev.lastMatched() == 0)
-    return failure(r, NdtStatus::NO_CORRESPONDENCE,
+    return failure(r, NdtResultStatus::NO_CORRESPONDENCE,
                    "no source point lies near a target voxel at the initial guess; check the guess and the map");
 
   bool converged = false;
@@ -419,36 +423,41 @@ NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, co
       slope = -slope;
     }
     ++r.iterations;
-    double step = 0.0;
     if (slope == 0.0) {
       converged = true;
       break;
     }
-    if (config_.line_search) {
+    // At a positive definite Hessian a Newton step shorter than transformation_epsilon lands on the minimum of the
+    // local quadratic model, and the cost decrease it brings (second order in the step) is below the round-off of
+    // the float sums and the jumps where points change voxels. A line search cannot measure it: it kept shrinking
+    // such a step for up to max_evaluations passes over the scan and then took almost none of it. Take it whole.
+    const bool newton_converged = norm < config_.transformation_epsilon && isPositiveDefinite(D.hessian);
+    double step = 0.0;
+    if (config_.line_search && !newton_converged) {
       NdtDerivatives trial;
-      const double phi0 = D.cost;
       step = moreThuente(
           [&](double a, double* value, double* deriv) {
-            trial = ev.evaluate(p + a * dir, true);
+            trial = evaluate(p + a * dir);
             *value = trial.cost;
             *deriv = trial.gradient.dot(dir);
           },
-          phi0, slope, norm, 0.0, config_.step_size);
+          D.cost, slope, norm, 0.0, config_.step_size);
       D = trial;
     } else {
       step = std::min(norm, config_.step_size);
-      D = ev.evaluate(p + step * dir, true);
+      D = evaluate(p + step * dir);
     }
     p += step * dir;
     // A short step alone is not convergence: DIRECT searches can stall on a saddle or a ridge of the piecewise-
     // smooth cost, where the saddle-free step keeps going downhill. Require a positive definite Hessian too.
-    if (step < config_.transformation_epsilon && isPositiveDefinite(D.hessian)) {
+    if (newton_converged || (step < config_.transformation_epsilon && isPositiveDefinite(D.hessian))) {
       converged = true;
       break;
     }
   }
   if (!p.allFinite() || !D.hessian.allFinite())
-    return failure(r, NdtStatus::DEGENERATE, "the optimisation diverged to a non-finite pose; the guess is returned");
+    return failure(r, NdtResultStatus::DEGENERATE,
+                   "the optimisation diverged to a non-finite pose; the guess is returned");
 
   const FinalStats fs = ev.finalStats(p);
   const Vector6d magnitudes = Eigen::SelfAdjointEigenSolver<Matrix6d>(D.hessian).eigenvalues().cwiseAbs();
@@ -458,7 +467,7 @@ NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, co
   r.nvtl = fs.nvtl;
   r.inlier_fraction = fs.inlier_fraction;
   if (fs.matched_voxels < kMinMatchedVoxels)
-    return failure(r, NdtStatus::DEGENERATE,
+    return failure(r, NdtResultStatus::DEGENERATE,
                    "the match is degenerate: only " + std::to_string(fs.matched_voxels) +
                        " distinct target voxels matched (at least " + std::to_string(kMinMatchedVoxels) +
                        " are needed to fix 6 DoF); the guess is returned");
@@ -466,11 +475,11 @@ NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, co
     std::ostringstream msg;
     msg << "the match is degenerate: the Hessian is singular (eigenvalue magnitudes in [" << magnitudes.minCoeff()
         << ", " << magnitudes.maxCoeff() << "]), some direction is unconstrained; the guess is returned";
-    return failure(r, NdtStatus::DEGENERATE, msg.str());
+    return failure(r, NdtResultStatus::DEGENERATE, msg.str());
   }
   r.transform = poseToMatrix(p).cast<float>();
   r.converged = converged;
-  r.status = converged ? NdtStatus::OK : NdtStatus::MAX_ITERATIONS;
+  r.status = converged ? NdtResultStatus::OK : NdtResultStatus::MAX_ITERATIONS;
   if (!converged)
     r.message = "stopped after max_iterations before the step fell below transformation_epsilon at a minimum";
   return r;

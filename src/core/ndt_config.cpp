@@ -35,21 +35,21 @@ const char* toString(NdtSearchMethod method) {
   return "?";
 }
 
-const char* toString(NdtStatus status) {
+const char* toString(NdtResultStatus status) {
   switch (status) {
-    case NdtStatus::OK:
+    case NdtResultStatus::OK:
       return "OK";
-    case NdtStatus::MAX_ITERATIONS:
+    case NdtResultStatus::MAX_ITERATIONS:
       return "MAX_ITERATIONS";
-    case NdtStatus::EMPTY_TARGET:
+    case NdtResultStatus::EMPTY_TARGET:
       return "EMPTY_TARGET";
-    case NdtStatus::TOO_FEW_POINTS:
+    case NdtResultStatus::TOO_FEW_POINTS:
       return "TOO_FEW_POINTS";
-    case NdtStatus::NO_CORRESPONDENCE:
+    case NdtResultStatus::NO_CORRESPONDENCE:
       return "NO_CORRESPONDENCE";
-    case NdtStatus::DEGENERATE:
+    case NdtResultStatus::DEGENERATE:
       return "DEGENERATE";
-    case NdtStatus::INVALID_INPUT:
+    case NdtResultStatus::INVALID_INPUT:
       return "INVALID_INPUT";
   }
   return "?";

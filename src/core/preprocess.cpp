@@ -1,27 +1,19 @@
 #include "grid_puzzle_localization/preprocess.hpp"
 
 #include <cmath>
-#include <cstdint>
 #include <sstream>
 #include <stdexcept>
-#include <unordered_map>
 
 namespace grid_puzzle_localization {
 namespace {
 
-struct VoxelKeyHash {
-  std::size_t operator()(const Eigen::Vector3i& k) const noexcept {
-    // Large odd multipliers spread neighbouring integer keys across buckets.
-    const auto x = static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.x()));
-    const auto y = static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.y()));
-    const auto z = static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.z()));
-    return static_cast<std::size_t>((x * 73856093ULL) ^ (y * 19349663ULL) ^ (z * 83492791ULL));
-  }
-};
-
-struct VoxelKeyEqual {
-  bool operator()(const Eigen::Vector3i& a, const Eigen::Vector3i& b) const noexcept { return a == b; }
-};
+std::size_t hashKey(std::int32_t x, std::int32_t y, std::int32_t z) {
+  // Large odd multipliers spread neighbouring keys; the final xor-shift brings high bits into the mask.
+  std::uint64_t h = static_cast<std::uint64_t>(static_cast<std::uint32_t>(x)) * 0x9E3779B97F4A7C15ULL ^
+                    static_cast<std::uint64_t>(static_cast<std::uint32_t>(y)) * 0xC2B2AE3D27D4EB4FULL ^
+                    static_cast<std::uint64_t>(static_cast<std::uint32_t>(z)) * 0x165667B19E3779F9ULL;
+  return static_cast<std::size_t>(h ^ (h >> 29));
+}
 
 }  // namespace
 
@@ -33,41 +25,48 @@ std::string PreprocessConfig::validate() const {
   return err.str();
 }
 
-PointCloud voxelDownsample(const PointCloud& input, double leaf) {
-  if (!(leaf > 0.0)) throw std::invalid_argument("voxelDownsample: leaf must be > 0 m");
+void VoxelCentroidFilter::apply(const PointCloud& input, double leaf, PointCloud& out) {
+  if (!(leaf > 0.0)) throw std::invalid_argument("voxel filter: leaf must be > 0 m");
+  std::size_t capacity = 16;
+  while (capacity < 2 * input.size()) capacity *= 2;
+  if (slots_.size() < capacity) slots_.assign(capacity, Slot{0, 0, 0, -1});
+  const std::size_t mask = slots_.size() - 1;
   const double inv = 1.0 / leaf;
-  struct Acc {
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    std::size_t n = 0;
-  };
-  std::unordered_map<Eigen::Vector3i, std::size_t, VoxelKeyHash, VoxelKeyEqual> slot;
-  slot.reserve(input.size());
-  std::vector<Acc> acc;
-  acc.reserve(input.size() / 4 + 1);
+  sums_.clear();
+  counts_.clear();
+  used_slots_.clear();
   for (const Point& p : input) {
-    const Eigen::Vector3i key(static_cast<int>(std::floor(p.x() * inv)), static_cast<int>(std::floor(p.y() * inv)),
-                              static_cast<int>(std::floor(p.z() * inv)));
-    auto [it, inserted] = slot.try_emplace(key, acc.size());
-    if (inserted) acc.emplace_back();
-    Acc& a = acc[it->second];
-    a.sum += p.cast<double>();
-    ++a.n;
+    const auto x = static_cast<std::int32_t>(std::floor(p.x() * inv));
+    const auto y = static_cast<std::int32_t>(std::floor(p.y() * inv));
+    const auto z = static_cast<std::int32_t>(std::floor(p.z() * inv));
+    std::size_t s = hashKey(x, y, z) & mask;
+    while (slots_[s].voxel >= 0 && !(slots_[s].x == x && slots_[s].y == y && slots_[s].z == z)) s = (s + 1) & mask;
+    if (slots_[s].voxel < 0) {
+      slots_[s] = {x, y, z, static_cast<std::int32_t>(sums_.size())};
+      used_slots_.push_back(s);
+      sums_.push_back(Eigen::Vector3d::Zero());
+      counts_.push_back(0);
+    }
+    sums_[slots_[s].voxel] += p.cast<double>();
+    ++counts_[slots_[s].voxel];
   }
-  PointCloud out;
-  out.reserve(acc.size());
-  for (const Acc& a : acc) out.push_back((a.sum / static_cast<double>(a.n)).cast<float>());
-  return out;
+  for (std::size_t s : used_slots_) slots_[s].voxel = -1;  // empty again for the next call, in O(voxels)
+  out.resize(sums_.size());
+  for (std::size_t i = 0; i < sums_.size(); ++i) out[i] = (sums_[i] / static_cast<double>(counts_[i])).cast<float>();
 }
 
-PointCloud preprocess(const PointCloud& input, const PreprocessConfig& config, PreprocessReport* report) {
+Preprocessor::Preprocessor(const PreprocessConfig& config) : config_(config) {
   const std::string problem = config.validate();
   if (!problem.empty()) throw std::invalid_argument("preprocess: " + problem);
+}
+
+void Preprocessor::apply(const PointCloud& input, PointCloud& out, PreprocessReport* report) {
   PreprocessReport r;
   r.input = input.size();
-  PointCloud kept;
-  kept.reserve(input.size());
-  const double min2 = config.min_range * config.min_range;
-  const double max2 = config.max_range * config.max_range;
+  PointCloud& kept = config_.voxel_size > 0.0 ? kept_ : out;
+  kept.clear();
+  const double min2 = config_.min_range * config_.min_range;
+  const double max2 = config_.max_range * config_.max_range;
   for (const Point& p : input) {
     if (!p.allFinite()) {
       ++r.non_finite;
@@ -84,9 +83,20 @@ PointCloud preprocess(const PointCloud& input, const PreprocessConfig& config, P
     }
     kept.push_back(p);
   }
-  PointCloud out = config.voxel_size > 0.0 ? voxelDownsample(kept, config.voxel_size) : std::move(kept);
+  if (config_.voxel_size > 0.0) voxel_filter_.apply(kept_, config_.voxel_size, out);
   r.output = out.size();
   if (report) *report = r;
+}
+
+PointCloud preprocess(const PointCloud& input, const PreprocessConfig& config, PreprocessReport* report) {
+  PointCloud out;
+  Preprocessor(config).apply(input, out, report);
+  return out;
+}
+
+PointCloud voxelDownsample(const PointCloud& input, double leaf) {
+  PointCloud out;
+  VoxelCentroidFilter().apply(input, leaf, out);
   return out;
 }
 

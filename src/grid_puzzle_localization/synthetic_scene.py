@@ -55,6 +55,17 @@ class Drive:
         yaw = np.arctan2(dy, self.speed)
         return pose_matrix(np.array([x, y, 0.0]), yaw)
 
+    def angular_velocity(self, t: np.ndarray) -> np.ndarray:
+        """Body angular velocity ``(len(t), 3)`` [rad/s] at times ``t`` [s], what a gyro on base_link reads
+        (noise-free): the yaw rate d/dt atan(y'(t) / v) about z."""
+        t = np.asarray(t, dtype=np.float64)
+        a, w = self.weave_amplitude, self.weave_omega
+        u = a * w * np.cos(w * t) / self.speed  # tan(yaw)
+        du = -a * w * w * np.sin(w * t) / self.speed
+        rates = np.zeros((t.size, 3))
+        rates[:, 2] = du / (1.0 + u * u)
+        return rates
+
 
 def pose_matrix(xyz: np.ndarray, yaw: float) -> np.ndarray:
     """4x4 homogeneous transform: rotation ``yaw`` [rad] about z, then translation ``xyz`` [m]."""
@@ -119,7 +130,9 @@ def raycast(scene: Scene, origin: np.ndarray, dirs: np.ndarray, max_range: float
         ok = (t > 0) & (hit[:, 0] >= xmin) & (hit[:, 0] <= xmax) & (hit[:, 1] >= ymin) & (hit[:, 1] <= ymax)
         t_best = np.where(ok, t, t_best)
         inv = 1.0 / dirs
-        for lo, hi in scene.boxes:
+        # Surfaces farther than max_range cannot give a hit that is kept: skip them (same result, less work).
+        box_distance = np.linalg.norm(np.clip(origin, scene.boxes[:, 0], scene.boxes[:, 1]) - origin, axis=1)
+        for lo, hi in scene.boxes[box_distance <= max_range]:
             t1 = (lo - origin) * inv
             t2 = (hi - origin) * inv
             t_near = np.nanmax(np.minimum(t1, t2), axis=1)
@@ -128,7 +141,8 @@ def raycast(scene: Scene, origin: np.ndarray, dirs: np.ndarray, max_range: float
             t_best = np.where(ok, t_near, t_best)
         dxy = dirs[:, :2]
         a = np.einsum("ij,ij->i", dxy, dxy)
-        for x, y, r, h in scene.poles:
+        pole_distance = np.hypot(scene.poles[:, 0] - origin[0], scene.poles[:, 1] - origin[1]) - scene.poles[:, 2]
+        for x, y, r, h in scene.poles[pole_distance <= max_range]:
             oc = origin[:2] - (x, y)
             b = dxy @ oc
             c = oc @ oc - r * r

@@ -47,7 +47,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
     tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
     odom_pub_ = nh.advertise<nav_msgs::Odometry>("odom", 10);
-    status_pub_ = advertiseNdtStatus(pnh, "status");
+    status_pub_ = pnh.advertise<NdtStatus>("status", 10);
     if (params_.publish_aligned_points) aligned_pub_ = nh.advertise<sensor_msgs::PointCloud2>("aligned_points", 2);
 
     if (params_.map_source == "cloud") {
@@ -205,8 +205,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
 
     std_msgs::Header status_header = scan_header;
     status_header.frame_id = params_.map_frame;
-    publishNdtStatus(status_pub_, status_header, summarize(out, localizer_->map().stats().update_ms),
-                     params_.map_source);
+    status_pub_.publish(toStatusMsg(out, status_header, localizer_->map().stats().update_ms, params_.map_source));
 
     if (params_.publish_aligned_points && aligned_pub_.getNumSubscribers() > 0) {
       std_msgs::Header h = scan_header;

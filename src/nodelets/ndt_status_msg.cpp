@@ -1,31 +1,25 @@
 #include "ndt_status_msg.hpp"
 
-#include "grid_puzzle_localization/NdtStatus.h"
-
 namespace grid_puzzle_localization {
 
-ros::Publisher advertiseNdtStatus(ros::NodeHandle& nh, const std::string& topic) {
-  return nh.advertise<NdtStatus>(topic, 10);
-}
-
-void publishNdtStatus(const ros::Publisher& pub, const std_msgs::Header& header, const MatchSummary& s,
+NdtStatus toStatusMsg(const LocalizerOutput& out, const std_msgs::Header& header, double target_update_ms,
                       const std::string& map_source) {
   NdtStatus msg;
   msg.header = header;
-  msg.converged = s.converged;
-  msg.match_accepted = s.match_accepted;
-  msg.iterations = s.iterations;
-  msg.score = s.score;
-  msg.transformation_probability = s.transformation_probability;
-  msg.nvtl = s.nvtl;
-  msg.inlier_fraction = s.inlier_fraction;
-  msg.align_time_ms = s.align_ms;
-  msg.target_update_time_ms = s.target_update_ms;
-  msg.target_voxels = s.target_voxels;
-  msg.target_points = s.target_points;
-  msg.source_points = static_cast<std::uint32_t>(s.source_points);
+  msg.converged = out.ndt.converged;
+  msg.match_accepted = out.match_accepted;
+  msg.iterations = out.ndt.iterations;
+  msg.score = out.ndt.score;
+  msg.transformation_probability = out.ndt.transformation_probability;
+  msg.nvtl = out.ndt.nvtl;
+  msg.inlier_fraction = out.ndt.inlier_fraction;
+  msg.align_time_ms = out.align_ms;
+  msg.target_update_time_ms = target_update_ms;
+  msg.target_voxels = out.target_voxels;
+  msg.target_points = out.target_points;
+  msg.source_points = static_cast<std::uint32_t>(out.ndt.source_points);
   msg.map_source = map_source;
-  pub.publish(msg);
+  return msg;
 }
 
 }  // namespace grid_puzzle_localization

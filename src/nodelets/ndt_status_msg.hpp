@@ -1,19 +1,16 @@
-// ~status publishing, in its own translation unit: the generated NdtStatus message and the core's
-// NdtStatus enum (ndt.hpp) share a namespace and cannot be included together.
+// Core LocalizerOutput -> grid_puzzle_localization/NdtStatus (the ~status message).
 #pragma once
-
-#include <ros/node_handle.h>
-#include <ros/publisher.h>
-#include <std_msgs/Header.h>
 
 #include <string>
 
-#include "grid_puzzle_localization/match_summary.hpp"
+#include "grid_puzzle_localization/NdtStatus.h"
+#include "grid_puzzle_localization/localizer.hpp"
 
 namespace grid_puzzle_localization {
 
-ros::Publisher advertiseNdtStatus(ros::NodeHandle& nh, const std::string& topic);
-void publishNdtStatus(const ros::Publisher& pub, const std_msgs::Header& header, const MatchSummary& summary,
+/// The diagnostics of one tracked scan; `target_update_ms` is the last background target update [ms] and
+/// `map_source` the ~map_source parameter (cloud | tiles | pcd).
+NdtStatus toStatusMsg(const LocalizerOutput& out, const std_msgs::Header& header, double target_update_ms,
                       const std::string& map_source);
 
 }  // namespace grid_puzzle_localization

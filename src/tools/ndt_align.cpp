@@ -155,7 +155,7 @@ int main(int argc, char** argv) {
        << ", \"method\": \"" << gpl::toString(a.config.search) << "\", \"threads\": " << a.config.threads
        << ", \"resolution\": " << a.config.resolution << "}";
     std::cout << js.str() << std::endl;
-    if (r.status != gpl::NdtStatus::OK && r.status != gpl::NdtStatus::MAX_ITERATIONS) {
+    if (r.status != gpl::NdtResultStatus::OK && r.status != gpl::NdtResultStatus::MAX_ITERATIONS) {
       std::cerr << "ndt_align: alignment failed (" << gpl::toString(r.status) << "): " << r.message << "\n";
       return 1;
     }

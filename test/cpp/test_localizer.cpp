@@ -198,3 +198,28 @@ TEST(Localizer, RejectsBadConfigNamingTheValue) {
     EXPECT_NE(std::string(e.what()).find("min_nvtl"), std::string::npos);
   }
 }
+
+// While tracking, the constant-velocity prediction is within millimetres of the match, inside
+// transformation_epsilon: NDT must take one Newton step (two passes over the scan: at the prediction and at the
+// result), not spend passes on a line search that cannot measure a sub-millimetre decrease. Every scan's cost is
+// then the same, which is what keeps the latency tail short.
+TEST(Localizer, TrackingScansTakeOneNewtonStep) {
+  const gpl::PointCloud world = t::makeWorld();
+  gpl::Localizer loc(testConfig());
+  loc.map().submit(gpl::MapChange::fullCloud(world));
+  loc.map().waitIdle();
+  loc.setInitialPose(truthAt(0.0));
+  double worst = 0.0;
+  for (int i = 0; i <= 40; ++i) {
+    const double time = 0.1 * i;
+    const gpl::LocalizerOutput out = loc.processScan(time, scanAt(world, time, 300 + i), mount());
+    ASSERT_TRUE(out.match_accepted) << "scan " << i;
+    worst = std::max(worst, t::translationError(out.pose, truthAt(time)));
+    // Scan 0 starts at the initial pose, scan 1 from zero velocity (the vehicle moved 0.4 m): both converge first.
+    if (i < 2) continue;
+    EXPECT_LT(t::translationError(out.prediction, out.pose), 0.01) << "scan " << i;
+    EXPECT_EQ(out.ndt.iterations, 1) << "scan " << i;
+    EXPECT_EQ(out.ndt.evaluations, 2) << "scan " << i;
+  }
+  EXPECT_LT(worst, 0.05);
+}

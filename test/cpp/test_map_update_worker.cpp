@@ -62,6 +62,21 @@ TEST(MapUpdateWorker, TakeReadyHandsOutEachSnapshotOnce) {
   EXPECT_EQ(worker.stats().generation, 1u);
 }
 
+TEST(MapUpdateWorker, RetiredSnapshotIsFreedOnTheWorkerThread) {
+  gpl::MapUpdateWorker worker{gpl::VoxelMapParams()};
+  std::thread::id freed_on;
+  std::shared_ptr<const gpl::VoxelMap> old(new gpl::VoxelMap(gpl::VoxelMapParams()), [&](const gpl::VoxelMap* m) {
+    freed_on = std::this_thread::get_id();
+    delete m;
+  });
+  worker.retire(std::move(old));
+  worker.waitIdle();  // also waits until retired snapshots are dropped
+  EXPECT_NE(freed_on, std::thread::id());
+  EXPECT_NE(freed_on, std::this_thread::get_id());
+  EXPECT_FALSE(worker.busy());  // releasing is not a map update
+  EXPECT_EQ(worker.stats().generation, 0u);
+  EXPECT_EQ(worker.takeReady(), nullptr);
+}
 TEST(MapUpdateWorker, TileSequenceEqualsASynchronousBuildOfTheRemainingTiles) {
   const auto tiles = gpl::test::cutTiles(gpl::test::makeWorld(), 10.0f);
   std::vector<std::string> ids;

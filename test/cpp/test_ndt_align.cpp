@@ -49,7 +49,7 @@ TEST_P(NdtRecoversTransform, SixDofOnPlanesBoxesAndPoles) {
     cfg.transformation_epsilon = 1e-4;
     cfg.max_iterations = 60;
     const gpl::NdtResult r = alignScene(s, cfg);
-    ASSERT_EQ(r.status, gpl::NdtStatus::OK) << r.message;
+    ASSERT_EQ(r.status, gpl::NdtResultStatus::OK) << r.message;
     EXPECT_TRUE(r.converged);
     const auto [te, re] = gpl::synthetic::poseError(s.truth, r.transform.cast<double>());
     EXPECT_LT(te, 0.02) << "translation error [m]";
@@ -77,9 +77,43 @@ TEST(NdtAlign, FixedStepWithoutLineSearchAlsoConverges) {
   cfg.max_iterations = 100;
   const gpl::NdtResult r = alignScene(s, cfg);
   const auto [te, re] = gpl::synthetic::poseError(s.truth, r.transform.cast<double>());
-  ASSERT_EQ(r.status, gpl::NdtStatus::OK) << r.message;
+  ASSERT_EQ(r.status, gpl::NdtResultStatus::OK) << r.message;
   EXPECT_LT(te, 0.02);
   EXPECT_LT(re, 0.1);
+}
+
+// Tracking case: the guess is already within transformation_epsilon of the optimum, where the Newton step is exact
+// to second order and is taken whole (no line search): one iteration, two passes over the scan, landing on the
+// optimum found by a long run with a tiny epsilon (the reference). test_localizer checks the same on scans where a
+// line search used to spend up to 11 passes.
+TEST(NdtAlign, GuessWithinEpsilonTakesTheNewtonStepInTwoPasses) {
+  const Scene s = makeScene((gpl::Vector6d() << 0.2, -0.1, 0.03, 0.01, -0.02, 0.04).finished());
+  gpl::NdtConfig cfg;  // defaults: line search on, transformation_epsilon 0.01
+  gpl::NdtTarget target(cfg);
+  target.setTarget(s.target);
+  const gpl::NdtAligner aligner(cfg);
+  gpl::NdtConfig fine = cfg;
+  fine.transformation_epsilon = 1e-7;
+  fine.max_iterations = 100;
+  const gpl::NdtResult reference =
+      gpl::NdtAligner(fine).align(*target.snapshot(), s.source, Eigen::Matrix4f::Identity());
+  ASSERT_EQ(reference.status, gpl::NdtResultStatus::OK) << reference.message;
+  const gpl::Vector6d optimum = gpl::matrixToPose(reference.transform.cast<double>());
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  for (int trial = 0; trial < 10; ++trial) {
+    gpl::Vector6d offset;
+    for (int i = 0; i < 3; ++i) offset(i) = 0.003 * unit(rng);   // up to 3 mm per axis
+    for (int i = 3; i < 6; ++i) offset(i) = 0.0005 * unit(rng);  // up to 0.5 mrad per axis
+    const Eigen::Matrix4f guess = gpl::poseToMatrix(optimum + offset).cast<float>();
+    const gpl::NdtResult r = aligner.align(*target.snapshot(), s.source, guess);
+    ASSERT_EQ(r.status, gpl::NdtResultStatus::OK) << r.message;
+    EXPECT_EQ(r.iterations, 1);
+    EXPECT_EQ(r.evaluations, 2);  // at the guess and at the result
+    const auto [te, re] = gpl::synthetic::poseError(reference.transform.cast<double>(), r.transform.cast<double>());
+    EXPECT_LT(te, 0.5e-3) << "translation from the reference optimum [m]";
+    EXPECT_LT(re, 0.01) << "rotation from the reference optimum [deg]";
+  }
 }
 
 TEST(NdtAlign, ResultDoesNotDependOnThreadCount) {
@@ -114,32 +148,32 @@ TEST(NdtAlign, DegenerateInputsGiveAnErrorStatusNotACrash) {
   const gpl::PointCloud scene = gpl::synthetic::scene(1, 0.02, 5000);
   gpl::NdtTarget empty(cfg);
   gpl::NdtResult r = aligner.align(*empty.snapshot(), scene, Eigen::Matrix4f::Identity());
-  EXPECT_EQ(r.status, gpl::NdtStatus::EMPTY_TARGET);
+  EXPECT_EQ(r.status, gpl::NdtResultStatus::EMPTY_TARGET);
   expectFinite(r);
 
   gpl::NdtTarget target(cfg);
   target.setTarget(scene);
   r = aligner.align(*target.snapshot(), gpl::PointCloud(scene.begin(), scene.begin() + 3), Eigen::Matrix4f::Identity());
-  EXPECT_EQ(r.status, gpl::NdtStatus::TOO_FEW_POINTS);
+  EXPECT_EQ(r.status, gpl::NdtResultStatus::TOO_FEW_POINTS);
   expectFinite(r);
 
   const float nan = std::numeric_limits<float>::quiet_NaN();
   gpl::PointCloud with_nan = {{nan, 0, 0}, {0, nan, 0}};
   r = aligner.align(*target.snapshot(), with_nan, Eigen::Matrix4f::Identity());
-  EXPECT_EQ(r.status, gpl::NdtStatus::TOO_FEW_POINTS);
+  EXPECT_EQ(r.status, gpl::NdtResultStatus::TOO_FEW_POINTS);
   expectFinite(r);
 
   Eigen::Matrix4f bad_guess = Eigen::Matrix4f::Identity();
   bad_guess(0, 3) = nan;
   r = aligner.align(*target.snapshot(), scene, bad_guess);
-  EXPECT_EQ(r.status, gpl::NdtStatus::INVALID_INPUT);
+  EXPECT_EQ(r.status, gpl::NdtResultStatus::INVALID_INPUT);
   EXPECT_TRUE(r.hessian.allFinite());
 
   // Far from the map: no correspondence.
   Eigen::Matrix4f far = Eigen::Matrix4f::Identity();
   far(0, 3) = 1000.0f;
   r = aligner.align(*target.snapshot(), scene, far);
-  EXPECT_EQ(r.status, gpl::NdtStatus::NO_CORRESPONDENCE);
+  EXPECT_EQ(r.status, gpl::NdtResultStatus::NO_CORRESPONDENCE);
   expectFinite(r);
 
   // All target and source points in one voxel: one Gaussian cannot pin down a 6-DoF pose.
@@ -151,7 +185,7 @@ TEST(NdtAlign, DegenerateInputsGiveAnErrorStatusNotACrash) {
   one_voxel.setTarget(blob);
   ASSERT_EQ(one_voxel.snapshot()->gaussianCount(), 1u);
   r = aligner.align(*one_voxel.snapshot(), blob, Eigen::Matrix4f::Identity());
-  EXPECT_EQ(r.status, gpl::NdtStatus::DEGENERATE);
+  EXPECT_EQ(r.status, gpl::NdtResultStatus::DEGENERATE);
   expectFinite(r);
   EXPECT_EQ(r.transform, Eigen::Matrix4f::Identity());
 
@@ -161,7 +195,7 @@ TEST(NdtAlign, DegenerateInputsGiveAnErrorStatusNotACrash) {
   gpl::NdtTarget coarse(other);
   coarse.setTarget(scene);
   r = aligner.align(*coarse.snapshot(), scene, Eigen::Matrix4f::Identity());
-  EXPECT_EQ(r.status, gpl::NdtStatus::INVALID_INPUT);
+  EXPECT_EQ(r.status, gpl::NdtResultStatus::INVALID_INPUT);
   EXPECT_NE(r.message.find("resolution"), std::string::npos);
 }
 

@@ -35,7 +35,7 @@ TEST(NdtVersusPcl, RadiusSearchLandsOnPclsPose) {
   gpl::NdtTarget ours_target(cfg);
   ours_target.setTarget(target);
   const gpl::NdtResult ours = gpl::NdtAligner(cfg).align(*ours_target.snapshot(), source, guess);
-  ASSERT_EQ(ours.status, gpl::NdtStatus::OK) << ours.message;
+  ASSERT_EQ(ours.status, gpl::NdtResultStatus::OK) << ours.message;
 
   pcl::NormalDistributionsTransform<pcl::PointXYZ, pcl::PointXYZ> ndt;
   ndt.setResolution(static_cast<float>(cfg.resolution));

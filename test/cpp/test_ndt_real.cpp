@@ -27,7 +27,7 @@ TEST(NdtRealPair, Direct7AndRadiusMatchTheReference) {
   for (const auto method : {gpl::NdtSearchMethod::DIRECT1, gpl::NdtSearchMethod::DIRECT7,
                             gpl::NdtSearchMethod::DIRECT27, gpl::NdtSearchMethod::RADIUS}) {
     const gpl::NdtResult r = alignReal(method);
-    ASSERT_EQ(r.status, gpl::NdtStatus::OK) << gpl::toString(method) << ": " << r.message;
+    ASSERT_EQ(r.status, gpl::NdtResultStatus::OK) << gpl::toString(method) << ": " << r.message;
     const auto [te, re] = gpl::synthetic::poseError(ref, r.transform.cast<double>());
     const auto [te2, re2] = gpl::synthetic::poseError(ref2, r.transform.cast<double>());
     std::cout << gpl::toString(method) << ": " << r.iterations << " iterations, error vs fast_gicp " << te << " m "

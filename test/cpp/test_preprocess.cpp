@@ -1,7 +1,10 @@
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
 #include <limits>
+#include <map>
+#include <random>
 
 #include "grid_puzzle_localization/preprocess.hpp"
 
@@ -57,4 +60,55 @@ TEST(Preprocess, RejectsOutOfRangeParametersWithAMessage) {
   cfg = gpl::PreprocessConfig();
   cfg.voxel_size = -1;
   EXPECT_NE(cfg.validate().find("voxel_size"), std::string::npos);
+}
+
+namespace {
+
+// Brute force reference: centroids per voxel key in a std::map, in order of first appearance.
+gpl::PointCloud centroidsByMap(const gpl::PointCloud& in, double leaf) {
+  std::map<std::array<int, 3>, std::pair<Eigen::Vector3d, int>> cells;
+  std::vector<std::array<int, 3>> order;
+  for (const gpl::Point& p : in) {
+    const std::array<int, 3> k = {static_cast<int>(std::floor(p.x() / leaf)),
+                                  static_cast<int>(std::floor(p.y() / leaf)),
+                                  static_cast<int>(std::floor(p.z() / leaf))};
+    auto [it, fresh] = cells.try_emplace(k, Eigen::Vector3d::Zero(), 0);
+    if (fresh) order.push_back(k);
+    it->second.first += p.cast<double>();
+    ++it->second.second;
+  }
+  gpl::PointCloud out;
+  for (const auto& k : order) out.push_back((cells[k].first / cells[k].second).cast<float>());
+  return out;
+}
+
+gpl::PointCloud randomCloud(unsigned seed, int n, float half_extent) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(-half_extent, half_extent);
+  gpl::PointCloud c(n);
+  for (auto& p : c) p = gpl::Point(u(rng), u(rng), u(rng));
+  return c;
+}
+
+}  // namespace
+
+// One Preprocessor reused over scans of different sizes and places (its table keeps no stale voxel) gives
+// what a brute-force std::map grouping gives for each scan alone.
+TEST(Preprocess, ReusedPreprocessorMatchesBruteForceOnEveryScan) {
+  gpl::PreprocessConfig cfg;
+  cfg.min_range = 0.0;
+  cfg.max_range = 1000.0;
+  cfg.voxel_size = 0.5;
+  gpl::Preprocessor pre(cfg);
+  gpl::PointCloud out;
+  const std::vector<std::pair<int, float>> scans = {{20000, 30.0f}, {500, 2.0f}, {20000, 30.0f}, {60000, 80.0f}};
+  for (std::size_t i = 0; i < scans.size(); ++i) {
+    const gpl::PointCloud in = randomCloud(static_cast<unsigned>(i), scans[i].first, scans[i].second);
+    gpl::PreprocessReport r;
+    pre.apply(in, out, &r);
+    const gpl::PointCloud expected = centroidsByMap(in, cfg.voxel_size);
+    ASSERT_EQ(out.size(), expected.size()) << "scan " << i;
+    EXPECT_EQ(r.output, expected.size());
+    for (std::size_t k = 0; k < out.size(); ++k) ASSERT_EQ(out[k], expected[k]) << "scan " << i << " point " << k;
+  }
 }

@@ -57,6 +57,18 @@ def test_drive_heading_follows_the_velocity() -> None:
     np.testing.assert_allclose(a[:3, 0], velocity / np.linalg.norm(velocity), atol=1e-6)
 
 
+def test_gyro_rate_is_the_derivative_of_the_heading() -> None:
+    drive = ss.Drive(duration=20.0)
+    t = np.linspace(0.0, 19.0, 50)
+    h = 1e-6
+    yaw = [np.arctan2(drive.pose(x)[1, 0], drive.pose(x)[0, 0]) for x in np.r_[t - h, t + h]]
+    finite_difference = (np.array(yaw[t.size :]) - np.array(yaw[: t.size])) / (2 * h)
+    rates = drive.angular_velocity(t)
+    np.testing.assert_allclose(rates[:, 2], finite_difference, atol=1e-6)
+    assert np.all(rates[:, :2] == 0.0)
+    assert np.abs(rates[:, 2]).max() > 0.05  # the weave turns: the gyro has something to predict
+
+
 def test_sampled_map_covers_each_box_face() -> None:
     scene = small_scene()
     points = ss.sample_map(scene, spacing=0.25, noise=0.0)
