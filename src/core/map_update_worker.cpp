@@ -2,6 +2,9 @@
 
 #include <chrono>
 #include <stdexcept>
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 #include "grid_puzzle_localization/pcd_reader.hpp"
 
@@ -122,6 +125,19 @@ void MapUpdateWorker::apply(NdtTarget& target, const MapChange& change) {
   }
 }
 
+namespace {
+
+// glibc keeps freed heap pages in its per-thread arenas. Map updates free whole tile clouds and map
+// shards from several threads (callback, worker, OpenMP team), so without a trim the process keeps
+// the high-water mark of every arena and its RSS creeps up as the window moves.
+void returnFreedMemory() {
+#if defined(__GLIBC__)
+  malloc_trim(0);
+#endif
+}
+
+}  // namespace
+
 void MapUpdateWorker::run() {
   NdtTarget target(params_);
   std::unique_lock<std::mutex> lock(mutex_);
@@ -170,6 +186,7 @@ void MapUpdateWorker::run() {
     // Freeing the applied batch (large clouds) is the worker's job, not the scan thread's.
     lock.unlock();
     batch.clear();
+    returnFreedMemory();
     lock.lock();
     if (queue_.empty() && retired_.empty()) idle_.notify_all();
   }
