@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import sys
 import threading
+import time
 
 import rospy
 from geometry_msgs.msg import PoseWithCovarianceStamped
@@ -156,12 +157,14 @@ class MapProviderNode:
                 pose, self._latest = self._latest, None
             if pose is None:
                 continue
+            start = time.perf_counter()
             window = self.tracker.update(pose)
             if window is not None:
-                self._serve(pose, window)
+                self._serve(pose, window, start)
         self.store.close()
 
-    def _serve(self, pose: PoseSample, window: Window) -> None:
+    def _serve(self, pose: PoseSample, window: Window, start: float) -> None:
+        """Updates the store and publishes; ``start``: perf_counter() when the update began."""
         stamp = rospy.Time.from_sec(pose.t) if pose.t > 0.0 else rospy.Time.now()
         with self._lock:
             delta = self.store.update(window, self.tracker.predicted_windows())
@@ -182,7 +185,10 @@ class MapProviderNode:
                     [p for _, p in self.store.loaded()], self.store.dtype, header=stamped(self.frame, stamp)
                 )
             )
-        self.status_pub.publish(provider_status(stamped(self.frame, stamp), window, self.store.stats(), delta.load_ms))
+        update_ms = (time.perf_counter() - start) * 1e3
+        self.status_pub.publish(
+            provider_status(stamped(self.frame, stamp), window, self.store.stats(), delta.load_ms, update_ms)
+        )
 
     def _report(self, pose: PoseSample, window: Window, delta: StoreDelta) -> None:
         for path, reason in delta.newly_corrupt:

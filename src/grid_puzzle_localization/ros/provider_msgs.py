@@ -36,7 +36,9 @@ def tile_delta(
     return msg
 
 
-def provider_status(header: Header, window: Window, stats: StoreStats, load_ms: float) -> ProviderStatus:
+def provider_status(
+    header: Header, window: Window, stats: StoreStats, load_ms: float, update_ms: float
+) -> ProviderStatus:
     msg = ProviderStatus(header=header)
     msg.i_min, msg.i_max, msg.j_min, msg.j_max = window.bounds
     msg.theta = window.theta if math.isfinite(window.theta) else math.nan
@@ -45,6 +47,7 @@ def provider_status(header: Header, window: Window, stats: StoreStats, load_ms: 
     msg.points = stats.points
     msg.bytes = stats.bytes
     msg.load_ms = load_ms
+    msg.update_ms = update_ms
     msg.cache_hits = stats.cache_hits
     msg.cache_misses = stats.cache_misses
     msg.corrupt_tiles = list(stats.corrupt)
