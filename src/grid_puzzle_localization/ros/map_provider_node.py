@@ -27,8 +27,8 @@ from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.malloc_tuning import pin_mmap_threshold
 from grid_puzzle_localization.msg import ProviderStatus, TileDelta
 from grid_puzzle_localization.provider_config import ProviderConfig, load_config
-from grid_puzzle_localization.ros.cloud_msg import cloud_from_parts
 from grid_puzzle_localization.ros.provider_msgs import provider_status, stamped, tile_delta
+from grid_puzzle_localization.ros.streamed_msgs import StreamedCloud
 from grid_puzzle_localization.tile_directory import open_tile_directory
 from grid_puzzle_localization.tile_store import StoreDelta, TileStore
 from grid_puzzle_localization.window import PoseSample, Window, WindowTracker
@@ -78,7 +78,7 @@ class MapProviderNode:
                 ", ".join(self.directory.unparsable[:10]),
             )
         self.tracker = WindowTracker(self.config.window, self.s)
-        self.store = TileStore(self.directory, tiles.cache_mb)
+        self.store = TileStore(self.directory, tiles.cache_mb, xyz_only=tiles.xyz_only)
         self.frame = self.config.map_frame
         # Serialises store updates and every publish on tile_delta, so a reset sent to a new subscriber
         # (from rospy's connection thread) or by ~resend is consistent with the delta stream.
@@ -180,11 +180,10 @@ class MapProviderNode:
                 )
         self._report(pose, window, delta)
         if self.cloud_pub is not None and (first or delta.added or delta.removed):
-            self.cloud_pub.publish(
-                cloud_from_parts(
-                    [p for _, p in self.store.loaded()], self.store.dtype, header=stamped(self.frame, stamp)
-                )
-            )
+            # Streamed from the store's arrays, so the latched message holds no copy of the window, and
+            # rospy serialises it (one copy, freed once sent) only while map_cloud has subscribers.
+            header = stamped(self.frame, stamp)
+            self.cloud_pub.publish(StreamedCloud(header, self.store.dtype, self.store.point_arrays, is_dense=True))
         update_ms = (time.perf_counter() - start) * 1e3
         self.status_pub.publish(
             provider_status(stamped(self.frame, stamp), window, self.store.stats(), delta.load_ms, update_ms)
