@@ -98,7 +98,7 @@ DELTA_FIELDS = dict(
     removed_ids=["9_9", "11_-1"],
     i_min=-3,
     i_max=40,
-    j_min=-2**40,
+    j_min=-(2**40),
     j_max=2**40,
 )
 

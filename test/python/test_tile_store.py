@@ -301,6 +301,6 @@ def test_auto_cache_is_bounded_by_a_quarter_of_the_loaded_window(tmp_path):
             assert stats.cache_bytes <= limit
             fullest = max(fullest, stats.cache_bytes / limit)
             fraction_binds = fraction_binds or stats.bytes * AUTO_CACHE_FRACTION > AUTO_CACHE_MIN_BYTES
-        assert fraction_binds and fullest > 0.8  # more tiles were read ahead and left behind than fit: the bound was what held
+        assert fraction_binds and fullest > 0.8  # more tiles were read ahead and left behind than fit
     finally:
         store.close()
