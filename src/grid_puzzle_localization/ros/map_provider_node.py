@@ -24,7 +24,7 @@ from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger, TriggerResponse
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.malloc_tuning import pin_mmap_threshold
+from grid_puzzle_localization.malloc_tuning import limit_arenas, pin_mmap_threshold, trim_heap
 from grid_puzzle_localization.msg import ProviderStatus, TileDelta
 from grid_puzzle_localization.provider_config import ProviderConfig, load_config
 from grid_puzzle_localization.ros.provider_msgs import provider_status, stamped, tile_delta
@@ -184,6 +184,7 @@ class MapProviderNode:
             # rospy serialises it (one copy, freed once sent) only while map_cloud has subscribers.
             header = stamped(self.frame, stamp)
             self.cloud_pub.publish(StreamedCloud(header, self.store.dtype, self.store.point_arrays, is_dense=True))
+        trim_heap()  # tiles evicted from the cache and message buffers leave holes in the heap
         update_ms = (time.perf_counter() - start) * 1e3
         self.status_pub.publish(
             provider_status(stamped(self.frame, stamp), window, self.store.stats(), delta.load_ms, update_ms)
@@ -227,6 +228,7 @@ class MapProviderNode:
 
 def main() -> None:
     pin_mmap_threshold()
+    limit_arenas(1)  # before rospy starts its threads
     rospy.init_node("grid_puzzle_map_provider")
     try:
         config = load_config(lambda name, default: rospy.get_param("~" + name, default))
