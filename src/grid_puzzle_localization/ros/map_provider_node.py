@@ -20,15 +20,14 @@ import time
 import rospy
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger, TriggerResponse
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.malloc_tuning import limit_arenas, pin_mmap_threshold, trim_heap
 from grid_puzzle_localization.msg import ProviderStatus, TileDelta
 from grid_puzzle_localization.provider_config import ProviderConfig, load_config
+from grid_puzzle_localization.ros.map_cloud_publisher import MapCloudPublisher
 from grid_puzzle_localization.ros.provider_msgs import provider_status, stamped, tile_delta
-from grid_puzzle_localization.ros.streamed_msgs import StreamedCloud
 from grid_puzzle_localization.tile_directory import open_tile_directory
 from grid_puzzle_localization.tile_store import StoreDelta, TileStore
 from grid_puzzle_localization.window import PoseSample, Window, WindowTracker
@@ -92,8 +91,8 @@ class MapProviderNode:
         self.delta_pub = rospy.Publisher(
             "tile_delta", TileDelta, queue_size=50, subscriber_listener=ResetOnSubscribe(self)
         )
-        self.cloud_pub = (
-            rospy.Publisher("map_cloud", PointCloud2, queue_size=1, latch=True)
+        self.map_cloud = (
+            MapCloudPublisher(self.store, self.frame, self.config.map_cloud_period)
             if self.config.publish_map_cloud
             else None
         )
@@ -179,11 +178,8 @@ class MapProviderNode:
                     )
                 )
         self._report(pose, window, delta)
-        if self.cloud_pub is not None and (first or delta.added or delta.removed):
-            # Streamed from the store's arrays, so the latched message holds no copy of the window, and
-            # rospy serialises it (one copy, freed once sent) only while map_cloud has subscribers.
-            header = stamped(self.frame, stamp)
-            self.cloud_pub.publish(StreamedCloud(header, self.store.dtype, self.store.point_arrays, is_dense=True))
+        if self.map_cloud is not None and (first or delta.added or delta.removed):
+            self.map_cloud.changed(stamp)
         trim_heap()  # tiles evicted from the cache and message buffers leave holes in the heap
         update_ms = (time.perf_counter() - start) * 1e3
         self.status_pub.publish(
