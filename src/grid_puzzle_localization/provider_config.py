@@ -19,7 +19,7 @@ POSE_SOURCES = ("odom", "pose")
 class TilesConfig:
     dir: str = ""  # tile directory written by `gpm tile` (required)
     grid_size: float = 0.0  # [m] tile side s; 0 = take it from the index (required when there is none)
-    cache_mb: float = 0.0  # [MiB] bound of the prefetch cache; 0 = auto: a quarter of the loaded window's bytes
+    cache_mb: float = 0.0  # [MiB] bound of the prefetch cache; 0 = auto: an eighth of the loaded window's bytes
     xyz_only: bool = True  # keep x, y, z float32 only (what the localizer reads); false: every field of the files
 
 

@@ -8,7 +8,7 @@ skipped, reported once in the returned delta, and listed in the stats for good. 
 guards all state; files are read outside it.
 
 Memory: tiles are kept compact (x, y, z float32 by default, see tile_reader.py), and the cache is
-bounded by ``cache_mb``, by default a quarter of the loaded window (tiles read ahead are worth more
+bounded by ``cache_mb``, by default an eighth of the loaded window (tiles read ahead are worth more
 than tiles left behind: those only fill spare room and are evicted first).
 """
 
@@ -29,7 +29,7 @@ from grid_puzzle_localization.tile_reader import XYZ_DTYPE, read_tile
 from grid_puzzle_localization.window import Window
 
 Key = tuple[int, int]  # (i, j); internally tiles are keyed by their int64 code (tile_directory.encode_keys)
-AUTO_CACHE_FRACTION = 0.25  # cache_mb = 0: the cache holds this fraction of the loaded window's bytes
+AUTO_CACHE_FRACTION = 0.125  # cache_mb = 0: the cache holds this fraction of the loaded window's bytes
 AUTO_CACHE_MIN_BYTES = 2**20
 
 

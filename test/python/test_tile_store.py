@@ -285,16 +285,16 @@ def test_turn_into_a_neighbouring_sector_is_served_from_the_prefetch_cache(holey
         store.close()
 
 
-def test_auto_cache_is_bounded_by_a_quarter_of_the_loaded_window(tmp_path):
+def test_auto_cache_is_bounded_by_a_fraction_of_the_loaded_window(tmp_path):
     from grid_puzzle_localization.tile_store import AUTO_CACHE_FRACTION, AUTO_CACHE_MIN_BYTES
 
-    write_tiles(tmp_path, [(i, j) for i in range(30) for j in range(8)], S, count=8000)  # 96 kB of x y z
+    write_tiles(tmp_path, [(i, j) for i in range(30) for j in range(10)], S, count=8000)  # 96 kB of x y z
     store = TileStore(open_tile_directory(tmp_path, S))
-    tracker = WindowTracker(WindowConfig(n=3, k=3), S)
+    tracker = WindowTracker(WindowConfig(n=4, k=4), S)  # 9 x 13 tiles, 11 MB
     fullest, fraction_binds = 0.0, False
     try:
         for step in range(40):
-            store.update(tracker.update(PoseSample(1.0 + 1.5 * step, 7.0)), tracker.predicted_windows())
+            store.update(tracker.update(PoseSample(1.0 + 1.5 * step, 9.0)), tracker.predicted_windows())
             store.wait_prefetch_idle(timeout=30.0)
             stats = store.stats()
             limit = max(stats.bytes * AUTO_CACHE_FRACTION, AUTO_CACHE_MIN_BYTES)

@@ -4,14 +4,17 @@ The cloud is streamed from the store's tile arrays (streamed_msgs.StreamedCloud)
 holds no copy of the window, and rospy serialises it, one window-sized copy freed once sent, only while
 the topic has subscribers. At the paper's window (n 25, k 20: up to 71 x 71 tiles, about 90 MB at the
 paper's point density) that copy is still large, so this thread publishes at most once per ``period``
-[s], always the latest window, one serialisation at a time, and the worker never waits for it: the
-tile deltas the localizer needs are not held up by the display cloud.
+[s], always the latest window, and the worker never waits for it: the tile deltas the localizer needs
+are not held up by the display cloud. The publisher is synchronous (no queue_size): publish() returns
+once the cloud is sent, so one serialised copy exists at a time, where a queued publisher keeps one
+queued and one in flight besides the one being built when a subscriber (rviz) reads slowly.
 """
 
 from __future__ import annotations
 
 import threading
 import time
+import warnings
 
 import rospy
 from sensor_msgs.msg import PointCloud2
@@ -26,7 +29,9 @@ class MapCloudPublisher:
         self._store = store
         self._frame = frame
         self._period = period
-        self._pub = rospy.Publisher("map_cloud", PointCloud2, queue_size=1, latch=True)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", SyntaxWarning)  # rospy's hint to set queue_size: synchronous on purpose
+            self._pub = rospy.Publisher("map_cloud", PointCloud2, latch=True, queue_size=None)
         self._cond = threading.Condition()
         self._pending: rospy.Time | None = None  # stamp of the newest window not yet published
         self._thread = threading.Thread(target=self._run, name="map_cloud_publisher", daemon=True)
