@@ -14,6 +14,7 @@ publishing, not for reading back in this process.
 
 from __future__ import annotations
 
+import functools
 import io
 import struct
 from collections.abc import Callable, Sequence
@@ -47,15 +48,27 @@ def _header(header: Header) -> bytes:
     return _HEADER.pack(header.seq, header.stamp.secs, header.stamp.nsecs) + _string(header.frame_id)
 
 
-def _cloud_prefix(header: Header, dtype: np.dtype, width: int) -> bytes:
-    """Every byte of a serialised unorganised PointCloud2 before its point bytes (ending with the
-    length of ``data``)."""
+@functools.lru_cache(maxsize=64)
+def _fields(dtype: np.dtype) -> bytes:
+    """The serialised ``fields`` array of a cloud of ``dtype`` (the same for every tile of a window)."""
     fields = fields_of(dtype)
-    out = [_header(header), _CLOUD_SHAPE.pack(1, width), _U32.pack(len(fields))]
-    out += [_string(f.name) + _FIELD_TAIL.pack(f.offset, f.datatype, f.count) for f in fields]
-    out.append(_CLOUD_LAYOUT.pack(byte_order_is_big(dtype), dtype.itemsize, dtype.itemsize * width))
-    out.append(_U32.pack(dtype.itemsize * width))
-    return b"".join(out)
+    return _U32.pack(len(fields)) + b"".join(
+        _string(f.name) + _FIELD_TAIL.pack(f.offset, f.datatype, f.count) for f in fields
+    )
+
+
+def _cloud_prefix(header: bytes, dtype: np.dtype, width: int) -> bytes:
+    """Every byte of a serialised unorganised PointCloud2 before its point bytes (ending with the
+    length of ``data``); ``header``: the serialised std_msgs/Header."""
+    return b"".join(
+        [
+            header,
+            _CLOUD_SHAPE.pack(1, width),
+            _fields(dtype),
+            _CLOUD_LAYOUT.pack(byte_order_is_big(dtype), dtype.itemsize, dtype.itemsize * width),
+            _U32.pack(dtype.itemsize * width),
+        ]
+    )
 
 
 def _checked(parts: Sequence[np.ndarray], dtype: np.dtype) -> None:
@@ -100,7 +113,7 @@ class StreamedCloud(PointCloud2):
     def serialize(self, buff) -> None:
         parts = self._source()
         _checked(parts, self._dtype)
-        prefix = _cloud_prefix(self.header, self._dtype, sum(len(p) for p in parts))
+        prefix = _cloud_prefix(_header(self.header), self._dtype, sum(len(p) for p in parts))
         _reserve(buff, len(prefix) + sum(p.nbytes for p in parts) + 1)
         _write_cloud(buff, prefix, parts, self.is_dense)
 
@@ -117,7 +130,7 @@ class StreamedTileDelta(TileDelta):
             raise ValueError(f"{len(self.added_ids)} added ids but {len(self._added_points)} point arrays")
 
     def serialize(self, buff) -> None:
-        cloud_header = Header(frame_id=self.header.frame_id, stamp=self.header.stamp)
+        cloud_header = _header(Header(frame_id=self.header.frame_id, stamp=self.header.stamp))
         prefixes = []
         for points in self._added_points:
             _checked([points], points.dtype)
