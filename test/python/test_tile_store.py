@@ -109,6 +109,27 @@ def test_straight_drive_is_served_from_the_prefetch_cache(holey_map):
         store.close()
 
 
+def test_tiles_left_behind_never_evict_tiles_read_ahead(tmp_path):
+    """A cache that holds little more than the next column: tiles leaving the window must not push
+    out the column the prefetcher read for the next update."""
+    write_tiles(tmp_path, [(i, j) for i in range(40) for j in range(11)], S, count=20)  # 240 B of x y z
+    tile_bytes = 20 * XYZ_DTYPE.itemsize
+    store = TileStore(open_tile_directory(tmp_path, S), cache_mb=12 * tile_bytes / 2**20)
+    tracker = WindowTracker(WindowConfig(n=2, k=2), S)
+    misses = []
+    try:
+        for step in range(40):
+            window = tracker.update(PoseSample(1.0 + 1.5 * step, 11.0))  # rows 3..7; turns reach 1..9
+            if window is None:
+                continue
+            delta = store.update(window, tracker.predicted_windows())
+            misses.append(delta.misses)
+            assert store.wait_prefetch_idle(timeout=30.0)
+        assert sum(misses[2:]) == 0 and store.stats().cache_hits > 0
+    finally:
+        store.close()
+
+
 def test_u_turn_is_served_from_the_cache_without_prefetch(holey_map):
     store = TileStore(open_tile_directory(holey_map, S), cache_mb=8.0, prefetch=False)
     try:
