@@ -1,93 +1,104 @@
 #!/usr/bin/env python3
-"""Benchmark of the grid puzzle tile provider's work: a synthetic tiled map (default 500 m x 700 m,
-s = 2 m, with index.json), driven at 10 m/s in real time with n = 25, k = 20. Prints JSON.
+"""Benchmark of the grid_puzzle_map_provider node itself: the real node process, started with its
+default parameters (only tiles/dir, n and k set) under a private roscore, is driven by odometry at
+10 m/s in real time over a synthetic tiled map. Prints JSON.
 
-The parent process writes the map into a temp dir (timed separately, not part of any figure) and
-runs the measured drive in a child process, so the child's peak RSS is that of a process running the
-store exactly as the node does: window tracker, tile store with prefetch, TileDelta and map_cloud
-messages built and serialised (no ROS master needed). The temp dir is deleted afterwards.
+Two maps: the issue's sparse one (500 m x 700 m, s = 2 m, 64 points per tile) and a paper-scale one
+(1,600 points per tile, the density of the paper's and the demo's maps, about 27 KB per tile) with the
+paper's urban window n = 25, k = 20. Each map is driven twice: with a localizer-like subscriber on
+``tile_delta`` only (the experiment's setting), and with an rviz-like subscriber on ``map_cloud`` too.
+The node's peak RSS is the kernel's high-water mark (VmHWM of /proc/<pid>/status) of the node
+process; per-update latency is the node's own ``~status.update_ms`` (window, store, messages built and
+published). A bare rospy node (init_node and spin) is measured for reference. Temp dirs are deleted.
 """
 
 from __future__ import annotations
 
 import argparse
-import io
 import itertools
 import json
 import math
 import os
 import platform
 import shutil
-import subprocess
 import sys
 import tempfile
+import threading
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import rospy
+from grid_puzzle_localization.msg import ProviderStatus, TileDelta
+from nav_msgs.msg import Odometry
 
+from grid_puzzle_localization.experiment.processes import ManagedProcess, wait_for
+from grid_puzzle_localization.experiment.ros_stack import RosCore
 
-def parse_args() -> argparse.Namespace:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--width", type=float, default=500.0, help="map extent along x [m]")
-    p.add_argument("--height", type=float, default=700.0, help="map extent along y [m]")
-    p.add_argument("--grid-size", type=float, default=2.0, help="s [m]")
-    p.add_argument("--n", type=int, default=25)
-    p.add_argument("--k", type=int, default=20)
-    p.add_argument("--points-per-tile", type=int, default=64)
-    p.add_argument("--speed", type=float, default=10.0, help="[m/s]")
-    p.add_argument("--pose-rate", type=float, default=25.0, help="odometry rate [Hz]")
-    p.add_argument("--cache-mb", type=float, default=None, help="[MiB]; default: the provider's default")
-    p.add_argument("--repeats", type=int, default=3, help="fresh processes timed for the initial window load")
-    p.add_argument("--child", help=argparse.SUPPRESS)
-    p.add_argument(
-        "--phase", choices=("initial", "drive", "drive_no_map_cloud"), default="drive", help=argparse.SUPPRESS
-    )
-    return p.parse_args()
-
-
+ROOT = Path(__file__).resolve().parent.parent
+NODE_SCRIPT = ROOT / "scripts" / "grid_puzzle_map_provider"
+NODE = "/grid_puzzle_map_provider"
+BARE_NODE = "import rospy; rospy.init_node('bare_rospy'); rospy.spin()"
+WAIT = 60.0  # [s] bound on waiting for the node (never reported as a figure)
 # A drive with turns inside the map: east, north, a diagonal, west [fractions of width, height].
 ROUTE = [(0.12, 0.09), (0.88, 0.09), (0.88, 0.5), (0.4, 0.85), (0.12, 0.85)]
 
 
+def parse_args() -> argparse.Namespace:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--width", type=float, default=500.0, help="sparse map extent along x [m]")
+    p.add_argument("--height", type=float, default=700.0, help="sparse map extent along y [m]")
+    p.add_argument("--points-per-tile", type=int, default=64, help="sparse map")
+    p.add_argument("--paper-width", type=float, default=200.0, help="paper-scale map extent along x [m]")
+    p.add_argument("--paper-height", type=float, default=260.0, help="paper-scale map extent along y [m]")
+    p.add_argument("--paper-points-per-tile", type=int, default=1600, help="paper-scale map")
+    p.add_argument("--grid-size", type=float, default=2.0, help="s [m]")
+    p.add_argument("--n", type=int, default=25)
+    p.add_argument("--k", type=int, default=20)
+    p.add_argument("--speed", type=float, default=10.0, help="[m/s]")
+    p.add_argument("--pose-rate", type=float, default=25.0, help="odometry rate [Hz]")
+    p.add_argument("--cache-mb", type=float, default=None, help="[MiB] tiles/cache_mb; default: the node's default")
+    p.add_argument("--repeats", type=int, default=3, help="fresh node processes timed for the initial window")
+    p.add_argument("--scenarios", default="sparse,paper_scale", help="comma-separated subset of sparse,paper_scale")
+    p.add_argument("--no-map-cloud-subscriber", action="store_true", help="skip the drives with a map_cloud subscriber")
+    return p.parse_args()
+
+
 def route_poses(width: float, height: float, speed: float, rate: float) -> np.ndarray:
-    """(M, 3) poses (t [s], x [m], y [m]) along ROUTE at constant speed."""
+    """(M, 4) poses (t [s], x [m], y [m], yaw [rad]) along ROUTE at constant speed."""
     corners = np.array([(fx * width, fy * height) for fx, fy in ROUTE])
     out, t = [], 0.0
     step = speed / rate
     for a, b in itertools.pairwise(corners):
         length = float(np.hypot(*(b - a)))
+        yaw = math.atan2(*(b - a)[::-1])
         for d in np.arange(0.0, length, step):
-            out.append((t, *(a + (b - a) * d / length)))
+            out.append((t, *(a + (b - a) * d / length), yaw))
             t += 1.0 / rate
     return np.array(out)
 
 
-def make_map(directory: Path, args: argparse.Namespace) -> dict:
+def make_map(directory: Path, width: float, height: float, s: float, points_per_tile: int) -> dict:
     from grid_puzzle_localization.grid import tile_filename, tile_stem
     from grid_puzzle_localization.synthetic_tiles import POINT_DTYPE, write_tiles
     from grid_puzzle_localization.tiling.index import TileEntry, TileIndex, write_index
 
-    s = args.grid_size
-    ni, nj = math.ceil(args.width / s), math.ceil(args.height / s)
+    ni, nj = math.ceil(width / s), math.ceil(height / s)
     keys = [(i, j) for i in range(ni) for j in range(nj)]
-    start = time.perf_counter()
-    write_tiles(directory, keys, s, args.points_per_tile, seed=1)
-    size = POINT_DTYPE.itemsize * args.points_per_tile
+    write_tiles(directory, keys, s, points_per_tile, seed=1)
+    size = POINT_DTYPE.itemsize * points_per_tile
     entries = [
         TileEntry((i, j), tile_stem(i, j, s), tile_filename(i, j, s), ((i + 0.5) * s, (j + 0.5) * s),
-                  args.points_per_tile, {"min": [i * s, j * s, -1.0], "max": [(i + 1) * s, (j + 1) * s, 5.0]},
+                  points_per_tile, {"min": [i * s, j * s, -1.0], "max": [(i + 1) * s, (j + 1) * s, 5.0]},
                   size + 200, size)
         for i, j in keys
     ]  # fmt: skip
     fields = [{"name": n, "size": 4, "type": "F", "count": 1} for n in POINT_DTYPE.names]
-    write_index(directory, TileIndex(s, fields, POINT_DTYPE.itemsize, len(keys) * args.points_per_tile, 0, [], entries))
+    write_index(directory, TileIndex(s, fields, POINT_DTYPE.itemsize, len(keys) * points_per_tile, 0, [], entries))
     disk = sum(f.stat().st_size for f in directory.iterdir())
-    return {
-        "tiles": len(keys),
-        "disk_mb": round(disk / 2**20, 1),
-        "generation_s": round(time.perf_counter() - start, 1),
-    }
+    return {"width_m": width, "height_m": height, "grid_size_m": s, "points_per_tile": points_per_tile,
+            "fields": list(POINT_DTYPE.names), "tiles": len(keys), "disk_mb": round(disk / 2**20, 1)}  # fmt: skip
 
 
 def percentiles(values: list[float]) -> dict:
@@ -98,129 +109,200 @@ def percentiles(values: list[float]) -> dict:
             "max": round(float(a.max()), 2), "mean": round(float(a.mean()), 2)}  # fmt: skip
 
 
-def proc_status_mb(field: str) -> float:
-    """A memory field of /proc/self/status [MiB]: VmHWM is the peak resident set of this process
-    image (unlike ru_maxrss, not inherited from the parent across fork and exec), VmRSS the current."""
-    with open("/proc/self/status") as f:
-        return next(int(line.split()[1]) for line in f if line.startswith(field + ":")) / 1024.0
+def proc_status_mb(pid: int, name: str) -> float:
+    """A memory field of /proc/<pid>/status [MiB] (VmHWM: peak resident set; VmRSS: current)."""
+    with open(f"/proc/{pid}/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith(name + ":")) / 1024.0
 
 
-def rss_mb() -> float:
-    return proc_status_mb("VmHWM")
+def rollup_mb(pid: int) -> dict:
+    """Anonymous and file-backed parts of the resident set [MiB] (/proc/<pid>/smaps_rollup)."""
+    with open(f"/proc/{pid}/smaps_rollup") as f:
+        kib = {line.split(":")[0]: int(line.split()[1]) for line in f if line.split(":")[0] in ("Anonymous", "Rss")}
+    anonymous = kib["Anonymous"] / 1024
+    return {"anonymous": round(anonymous, 1), "file_backed": round(kib["Rss"] / 1024 - anonymous, 1)}
 
 
-def current_rss_mb() -> float:
-    return proc_status_mb("VmRSS")
+@dataclass
+class DriveRecord:
+    """What the driver saw of one run: the node's statuses and the deltas."""
+
+    status: list = field(default_factory=list)
+    added: list[int] = field(default_factory=list)
+    removed: list[int] = field(default_factory=list)
+    revisions: list[int] = field(default_factory=list)
+    map_clouds: int = 0
+    map_cloud_mb: float = 0.0
+    lock: threading.Lock = field(default_factory=threading.Lock)
 
 
-def child(args: argparse.Namespace) -> dict:
-    """The measured drive (runs in its own process, set up as the node sets itself up)."""
-    from grid_puzzle_localization.malloc_tuning import pin_mmap_threshold
+class NodeRun:
+    """One provider node process with the driver's subscribers; stops the node on exit."""
 
-    pin_mmap_threshold()
-    from genpy import Time
-    from std_msgs.msg import Header
+    def __init__(self, core, log_dir: Path, tiles: Path, args: argparse.Namespace, map_cloud_subscriber: bool):
+        self.record = DriveRecord()
+        params = {"tiles/dir": str(tiles), "window/n": args.n, "window/k": args.k}
+        if args.cache_mb is not None:
+            params["tiles/cache_mb"] = args.cache_mb
+        if rospy.has_param(NODE):
+            rospy.delete_param(NODE)
+        for name, value in params.items():
+            rospy.set_param(f"{NODE}/{name}", value)
+        self.subs = [
+            rospy.Subscriber("/tile_delta", TileDelta, self._on_delta, queue_size=1000),
+            rospy.Subscriber(NODE + "/status", ProviderStatus, self._on_status, queue_size=1000),
+        ]
+        if map_cloud_subscriber:
+            self.subs.append(rospy.Subscriber("/map_cloud", rospy.AnyMsg, self._on_cloud, queue_size=2))
+        self.odom = rospy.Publisher("/odom", Odometry, queue_size=100)
+        argv = [sys.executable, str(NODE_SCRIPT), f"__name:={NODE[1:]}", "odom:=/odom"]
+        self.process = ManagedProcess("grid_puzzle_map_provider", argv, core.env, log_dir / "provider.log")
+        try:
+            wait_for(
+                lambda: self.odom.get_num_connections() > 0 and all(s.get_num_connections() > 0 for s in self.subs),
+                WAIT,
+                "the provider's topics",
+                self.process,
+            )
+        except BaseException:
+            self.process.stop()
+            raise
 
-    from grid_puzzle_localization.provider_config import TilesConfig
-    from grid_puzzle_localization.ros.cloud_msg import cloud_from_parts
-    from grid_puzzle_localization.ros.provider_msgs import tile_delta
-    from grid_puzzle_localization.tile_directory import open_tile_directory
-    from grid_puzzle_localization.tile_store import TileStore
-    from grid_puzzle_localization.window import PoseSample, WindowConfig, WindowTracker
+    def _on_delta(self, msg) -> None:
+        with self.record.lock:
+            self.record.added.append(len(msg.added_ids))
+            self.record.removed.append(len(msg.removed_ids))
+            self.record.revisions.append(msg.revision)
 
-    rss_after_imports = rss_mb()
-    cache_mb = args.cache_mb if args.cache_mb is not None else TilesConfig.cache_mb
-    config = WindowConfig(n=args.n, k=args.k)
-    poses = route_poses(args.width, args.height, args.speed, args.pose_rate)
+    def _on_status(self, msg) -> None:
+        with self.record.lock:
+            self.record.status.append(msg)
 
-    def serialised(msg) -> int:
-        buff = io.BytesIO()
-        msg.serialize(buff)
-        return buff.tell()
+    def _on_cloud(self, msg) -> None:
+        with self.record.lock:
+            self.record.map_clouds += 1
+            self.record.map_cloud_mb = max(self.record.map_cloud_mb, len(msg._buff) / 2**20)
 
-    # Initial window: open the directory, load the first window, build its reset delta.
-    start = time.perf_counter()
-    directory = open_tile_directory(args.child)
-    tracker = WindowTracker(config, directory.grid_size)
-    store = TileStore(directory, cache_mb)
-    window = tracker.update(PoseSample(poses[0, 1], poses[0, 2], poses[0, 0]))
-    delta = store.update(window, tracker.predicted_windows())
-    serialised(tile_delta(Header(frame_id="map"), 1, True, directory.grid_size, window, delta.added, []))
-    initial = {"load_ms": (time.perf_counter() - start) * 1e3, "tiles": len(delta.added)}
-    if args.phase == "initial":
-        store.close()
-        return initial
-    rss_after_initial = rss_mb()
+    def send(self, t: float, x: float, y: float, yaw: float, speed: float) -> None:
+        msg = Odometry()
+        msg.header.frame_id = "map"
+        msg.header.stamp = rospy.Time.from_sec(t)
+        msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
+        msg.pose.pose.orientation.z, msg.pose.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+        msg.twist.twist.linear.x = speed
+        self.odom.publish(msg)
 
-    update_ms, cloud_ms, added, removed, window_bytes = [], [], [], [], []
-    skipped = 0
-    t0 = time.monotonic()
-    k = 1
-    while k < len(poses):
-        due = t0 + poses[k, 0]
-        now = time.monotonic()
-        if now < due:
-            time.sleep(due - now)
-        else:  # behind schedule: serve only the latest pose that is due, as the node does
-            latest = k + int((now - due) * args.pose_rate)
-            skipped += min(latest, len(poses) - 1) - k
-            k = min(latest, len(poses) - 1)
-        t, x, y = poses[k]
-        k += 1
-        start = time.perf_counter()
-        window = tracker.update(PoseSample(x, y, t))
-        if window is None:
-            continue
-        delta = store.update(window, tracker.predicted_windows())
-        header = Header(frame_id="map", stamp=Time.from_sec(t))
-        serialised(tile_delta(header, k, False, directory.grid_size, window, delta.added, delta.removed))
-        update_ms.append((time.perf_counter() - start) * 1e3)
-        added.append(len(delta.added))
-        removed.append(len(delta.removed))
-        if args.phase == "drive" and (delta.added or delta.removed):
-            start = time.perf_counter()
-            serialised(cloud_from_parts([p for _, p in store.loaded()], store.dtype, header=header))
-            cloud_ms.append((time.perf_counter() - start) * 1e3)
-        window_bytes.append(store.stats().bytes)
-    stats = store.stats()
-    store.close()
-    loaded_peak = max(window_bytes)
-    peak = rss_mb()
-    rss_end = current_rss_mb()
+    def wait_statuses(self, count: int) -> None:
+        wait_for(lambda: len(self.record.status) >= count, WAIT, f"{count} status messages", self.process)
+
+    def close(self) -> None:
+        for s in self.subs:
+            s.unregister()
+        self.odom.unregister()
+        self.process.stop()
+
+
+def drive(core, log_dir: Path, tiles: Path, args: argparse.Namespace, width: float, height: float, rviz: bool) -> dict:
+    """Starts a node, drives the route in real time and returns the figures of that run."""
+    poses = route_poses(width, height, args.speed, args.pose_rate)
+    run = NodeRun(core, log_dir, tiles, args, rviz)
+    try:
+        pid = run.process.pid
+        rss_start = proc_status_mb(pid, "VmRSS")
+        t0 = time.monotonic() + 0.5
+        for t, x, y, yaw in poses:
+            time.sleep(max(0.0, t0 + t - time.monotonic()))
+            run.send(t + 1.0, x, y, yaw, args.speed)
+        time.sleep(2.0)  # the last update and its messages
+        run.wait_statuses(1)
+        peak = proc_status_mb(pid, "VmHWM")
+        rss_end = proc_status_mb(pid, "VmRSS")
+        parts = rollup_mb(pid)
+    finally:
+        run.close()
+    rec = run.record
+    status = rec.status
+    window_bytes = max(m.bytes for m in status)
+    last = status[-1]
+    first = status[0]
+    initial_hits = first.cache_hits + first.cache_misses
+    later = last.cache_hits + last.cache_misses - initial_hits
+    target = 2 * window_bytes / 2**20 + 60.0
+    update_ms = [m.update_ms for m in status[1:]]
     return {
-        "route_m": round(float(np.sum(np.hypot(*np.diff(poses[:, 1:], axis=0).T))), 1),
+        "subscribers": "tile_delta, map_cloud (rviz-like)" if rviz else "tile_delta (localizer-like)",
+        "route_m": round(float(np.sum(np.hypot(*np.diff(poses[:, 1:3], axis=0).T))), 1),
         "drive_s": round(float(poses[-1, 0]), 1),
-        "poses": len(poses),
-        "poses_skipped_behind_schedule": skipped,
+        "poses_sent": len(poses),
         "updates": len(update_ms),
-        "initial_window": initial,
+        "initial_window": {"update_ms": round(first.update_ms, 1), "tiles": first.tiles_loaded},
         "update_ms": percentiles(update_ms),
-        "map_cloud_ms": percentiles(cloud_ms),
-        "tiles_added_per_update": percentiles(added),
-        "tiles_removed_per_update": percentiles(removed),
+        "load_ms": percentiles([m.load_ms for m in status[1:]]),
+        "tiles_added_per_update": percentiles(rec.added[1:]),
+        "tiles_removed_per_update": percentiles(rec.removed[1:]),
+        "deltas_received": len(rec.revisions),
+        "delta_revisions_contiguous": rec.revisions == list(range(1, len(rec.revisions) + 1)),
+        "map_clouds_received": rec.map_clouds,
+        "map_cloud_mb_max": round(rec.map_cloud_mb, 2),
         "cache": {
-            "cache_mb": cache_mb,
-            "hits": stats.cache_hits,
-            "misses": stats.cache_misses,
-            "hit_rate": round(stats.hit_rate, 4),
-            "hit_rate_after_initial_window": round(
-                stats.cache_hits / max(1, stats.cache_hits + stats.cache_misses - initial["tiles"]), 4
-            ),
-            "prefetched_tiles": stats.prefetched,
+            "hits": last.cache_hits,
+            "misses": last.cache_misses,
+            "hit_rate_after_initial_window": round(last.cache_hits / max(1, later), 4),
         },
-        "memory": {
-            "loaded_window_mb_max": round(loaded_peak / 2**20, 2),
-            "rss_after_imports_mb": round(rss_after_imports, 1),
-            "peak_rss_after_initial_window_mb": round(rss_after_initial, 1),
-            "peak_rss_mb": round(peak, 1),
-            "rss_at_end_mb": round(rss_end, 1),
-            "target_rss_mb": round(2 * loaded_peak / 2**20 + 60.0, 1),
+        "memory_mib": {
+            "loaded_window_max": round(window_bytes / 2**20, 2),
+            "rss_at_start": round(rss_start, 1),
+            "peak_rss": round(peak, 1),
+            "rss_at_end": round(rss_end, 1),
+            "at_end": parts,
+            "target_rss": round(target, 1),
         },
         "targets_met": {
             "update_p95_le_50ms": bool(np.percentile(update_ms, 95) <= 50.0),
-            "rss_le_2x_window_plus_60mb": bool(peak <= 2 * loaded_peak / 2**20 + 60.0),
+            "rss_le_2x_window_plus_60mb": bool(peak <= target),
         },
     }
+
+
+def initial_loads(core, log_dir: Path, tiles: Path, args: argparse.Namespace, width: float, height: float) -> list:
+    """update_ms of the first window in fresh node processes."""
+    poses = route_poses(width, height, args.speed, args.pose_rate)
+    out = []
+    for _ in range(args.repeats):
+        run = NodeRun(core, log_dir, tiles, args, False)
+        try:
+            run.send(1.0, poses[0, 1], poses[0, 2], poses[0, 3], 0.0)
+            run.wait_statuses(1)
+            out.append(round(run.record.status[0].update_ms, 1))
+        finally:
+            run.close()
+    return out
+
+
+def bare_rospy_rss(core, log_dir: Path) -> dict:
+    """RSS of a node that only imports rospy, calls init_node and spins."""
+    proc = ManagedProcess("bare_rospy", [sys.executable, "-c", BARE_NODE], core.env, log_dir / "bare.log")
+    try:
+        time.sleep(5.0)
+        return {"rss": round(proc_status_mb(proc.pid, "VmRSS"), 1), **rollup_mb(proc.pid)}
+    finally:
+        proc.stop()
+
+
+def scenario(core, log_dir: Path, args: argparse.Namespace, width: float, height: float, points: int) -> dict:
+    tiles = Path(tempfile.mkdtemp(prefix="gpm_bench_provider_"))
+    try:
+        made = make_map(tiles, width, height, args.grid_size, points)
+        plain = drive(core, log_dir, tiles, args, width, height, rviz=False)
+        loads = [plain["initial_window"]["update_ms"], *initial_loads(core, log_dir, tiles, args, width, height)[1:]]
+        plain["initial_window"]["update_ms_median"] = round(float(np.median(loads)), 1)
+        plain["initial_window"]["update_ms_all"] = loads
+        out = {"map": made, "drive": plain}
+        if not args.no_map_cloud_subscriber:
+            out["drive_with_map_cloud_subscriber"] = drive(core, log_dir, tiles, args, width, height, rviz=True)
+    finally:
+        shutil.rmtree(tiles, ignore_errors=True)
+    return out
 
 
 def hardware() -> dict:
@@ -230,54 +312,47 @@ def hardware() -> dict:
             model = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), model)
     except OSError:
         pass
-    return {"cpu_model": model, "cores": os.cpu_count(), "threads_used": 2, "python": platform.python_version()}
-
-
-def run_child(directory: Path, phase: str) -> dict:
-    run = subprocess.run(
-        [sys.executable, os.path.abspath(__file__), *sys.argv[1:], "--child", str(directory), "--phase", phase],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    if run.returncode != 0:
-        raise RuntimeError(f"benchmark child ({phase}) failed:\n{run.stderr}")
-    return json.loads(run.stdout)
+    return {
+        "cpu_model": model,
+        "cores": os.cpu_count(),
+        "node_threads": "worker + prefetcher (+ rospy's)",
+        "python": platform.python_version(),
+        "load_average_1_5_15_at_end": [round(v, 2) for v in os.getloadavg()],
+    }
 
 
 def main() -> int:
     args = parse_args()
-    if args.child:
-        print(json.dumps(child(args)))
-        return 0
-    directory = Path(tempfile.mkdtemp(prefix="gpm_bench_provider_"))
+    log_dir = Path(tempfile.mkdtemp(prefix="gpm_bench_provider_logs_"))
+    load_before = [round(v, 2) for v in os.getloadavg()]
     try:
-        made = make_map(directory, args)
-        # The initial load in fresh processes (the first one of them also drives), median reported.
-        initial = [run_child(directory, "drive")]
-        initial += [run_child(directory, "initial") for _ in range(args.repeats - 1)]
-        measured = initial[0]
-        loads = [measured["initial_window"]["load_ms"]] + [r["load_ms"] for r in initial[1:]]
-        measured["initial_window"] = {
-            "load_ms_median": round(float(np.median(loads)), 1),
-            "load_ms_all": [round(ms, 1) for ms in loads],
-            "tiles": measured["initial_window"]["tiles"],
-        }
-        # The same drive with publish_map_cloud: false, for its latency and memory.
-        lean = run_child(directory, "drive_no_map_cloud")
-        measured["without_map_cloud"] = {key: lean[key] for key in ("update_ms", "memory", "targets_met")}
-    finally:
-        shutil.rmtree(directory, ignore_errors=True)
-    result = {
-        "benchmark": "grid_puzzle_map_provider",
-        "map": {"width_m": args.width, "height_m": args.height, "grid_size_m": args.grid_size,
-                "points_per_tile": args.points_per_tile, **made},
-        "window": {"n": args.n, "k": args.k, "speed_mps": args.speed, "pose_rate_hz": args.pose_rate},
-        **measured,
-        "hardware": hardware(),
-        "notes": "tile files were just written, so reads hit the OS page cache; update_ms covers window,"
-        " store update and the TileDelta built and serialised; map_cloud_ms the merged cloud built and serialised",
-    }  # fmt: skip
+        with RosCore(log_dir) as core:
+            os.environ.update(core.env)
+            rospy.init_node("bench_provider_driver", disable_signals=True)
+            result = {
+                "benchmark": "grid_puzzle_map_provider",
+                "window": {"n": args.n, "k": args.k, "speed_mps": args.speed, "pose_rate_hz": args.pose_rate},
+                "bare_rospy_node_mib": bare_rospy_rss(core, log_dir),
+            }
+            maps = {
+                "sparse": (args.width, args.height, args.points_per_tile),
+                "paper_scale": (args.paper_width, args.paper_height, args.paper_points_per_tile),
+            }
+            for name in args.scenarios.split(","):
+                if name not in maps:
+                    raise SystemExit(f"--scenarios: unknown scenario '{name}'; use sparse and/or paper_scale")
+                result[name] = scenario(core, log_dir, args, *maps[name])
+            rospy.signal_shutdown("benchmark done")
+    except Exception:
+        print(f"benchmark failed; logs kept in {log_dir}", file=sys.stderr)
+        raise
+    shutil.rmtree(log_dir, ignore_errors=True)
+    result["hardware"] = {**hardware(), "load_average_1_at_start": load_before[0]}
+    result["notes"] = (
+        "MiB throughout; tile files were just written, so reads hit the OS page cache; update_ms is the node's"
+        " ~status.update_ms (window, store, tile_delta built and published; map_cloud has a thread of its own);"
+        " peak_rss is the node process's VmHWM; target_rss = 2 x loaded_window_max + 60"
+    )
     print(json.dumps(result, indent=1))
     return 0
 

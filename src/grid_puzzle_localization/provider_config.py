@@ -19,7 +19,8 @@ POSE_SOURCES = ("odom", "pose")
 class TilesConfig:
     dir: str = ""  # tile directory written by `gpm tile` (required)
     grid_size: float = 0.0  # [m] tile side s; 0 = take it from the index (required when there is none)
-    cache_mb: float = 0.0  # [MiB] bound of the prefetch cache; 0 = auto: the bytes of the loaded window
+    cache_mb: float = 0.0  # [MiB] bound of the prefetch cache; 0 = auto: an eighth of the loaded window's bytes
+    xyz_only: bool = True  # keep x, y, z float32 only (what the localizer reads); false: every field of the files
 
 
 @dataclass(frozen=True)
@@ -28,6 +29,7 @@ class ProviderConfig:
     window: WindowConfig = field(default_factory=WindowConfig)
     pose_source: str = "odom"  # odom: nav_msgs/Odometry on `odom`; pose: PoseWithCovarianceStamped on `pose`
     publish_map_cloud: bool = True  # publish the merged window on the latched `map_cloud`
+    map_cloud_period: float = 1.0  # [s] publish map_cloud at most this often (the latest window); 0 = every change
     map_frame: str = "map"  # frame of the tiles, the incoming poses and every published cloud
 
     def checked(self) -> ProviderConfig:
@@ -40,6 +42,8 @@ class ProviderConfig:
             )
         if not self.tiles.cache_mb >= 0.0:
             raise UserError(f"parameter tiles/cache_mb must be >= 0 MiB (got {self.tiles.cache_mb})")
+        if not self.map_cloud_period >= 0.0:
+            raise UserError(f"parameter map_cloud_period must be >= 0 s (got {self.map_cloud_period})")
         if self.pose_source not in POSE_SOURCES:
             raise UserError(f"parameter pose_source '{self.pose_source}' is unknown; use one of {POSE_SOURCES}")
         return dataclasses.replace(self, window=self.window.resolved())

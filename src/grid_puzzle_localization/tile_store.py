@@ -2,10 +2,14 @@
 update ahead in the direction of travel (the paper's Algorithm 2, step 4, made incremental).
 
 ``TileStore.update(window, predicted)`` loads the tiles that entered the window (from the cache when
-the prefetcher or an earlier window already read them), drops those that left (into the cache, so a
-U-turn is served from memory) and returns the change. A tile that fails to read is skipped, reported
-once in the returned delta, and listed in the stats for good. Thread-safe: one lock guards all state;
-files are read outside it.
+the prefetcher or an earlier window already read them), drops those that left (into the cache while it
+has room, so a U-turn is served from memory) and returns the change. A tile that fails to read is
+skipped, reported once in the returned delta, and listed in the stats for good. Thread-safe: one lock
+guards all state; files are read outside it.
+
+Memory: tiles are kept compact (x, y, z float32 by default, see tile_reader.py), and the cache is
+bounded by ``cache_mb``, by default an eighth of the loaded window (tiles read ahead are worth more
+than tiles left behind: those only fill spare room and are evicted first).
 """
 
 from __future__ import annotations
@@ -20,11 +24,13 @@ from pathlib import Path
 import numpy as np
 
 from grid_puzzle_localization.errors import PcdError
-from grid_puzzle_localization.pcd import read_pcd
 from grid_puzzle_localization.tile_directory import TileDirectory, decode_key
+from grid_puzzle_localization.tile_reader import XYZ_DTYPE, read_tile
 from grid_puzzle_localization.window import Window
 
 Key = tuple[int, int]  # (i, j); internally tiles are keyed by their int64 code (tile_directory.encode_keys)
+AUTO_CACHE_FRACTION = 0.125  # cache_mb = 0: the cache holds this fraction of the loaded window's bytes
+AUTO_CACHE_MIN_BYTES = 2**20
 
 
 @dataclass(frozen=True)
@@ -58,11 +64,16 @@ class StoreStats:
 
 
 class TileStore:
-    def __init__(self, directory: TileDirectory, cache_mb: float = 0.0, prefetch: bool = True) -> None:
-        """``cache_mb`` [MiB] bounds the cache; 0 (auto) bounds it by the bytes of the loaded window
-        (at least 1 MiB), enough for the tiles of the next windows and cheap in memory."""
+    def __init__(
+        self, directory: TileDirectory, cache_mb: float = 0.0, prefetch: bool = True, xyz_only: bool = True
+    ) -> None:
+        """``cache_mb`` [MiB] bounds the cache; 0 (auto) bounds it by AUTO_CACHE_FRACTION of the bytes of
+        the loaded window (at least 1 MiB): the tiles of the next window, and of a turn into a
+        neighbouring sector as far as they fit. ``xyz_only``: keep only x, y, z as float32 (else every
+        field of the tile files)."""
         self.directory = directory
         self._cache_mb = cache_mb
+        self._xyz_only = xyz_only
         self._loaded_bytes = 0
         self._lock = threading.Lock()
         self._changed = threading.Condition(self._lock)
@@ -70,7 +81,7 @@ class TileStore:
         self._cache: OrderedDict[int, np.ndarray] = OrderedDict()
         self._cache_bytes = 0
         self._corrupt: dict[int, str] = {}
-        self._dtype: np.dtype | None = None
+        self._dtype: np.dtype | None = XYZ_DTYPE if xyz_only else None
         self._stats = StoreStats()
         self._pending: list[int] = []
         self._generation = 0
@@ -94,7 +105,7 @@ class TileStore:
             for code in removed:
                 points = self._loaded.pop(code)
                 self._loaded_bytes -= points.nbytes
-                self._cache_put(code, points)
+                self._cache_put(code, points, spare_room_only=True)
             entering = [c for c in wanted_codes.tolist() if c not in self._loaded and c not in self._corrupt]
         added: list[tuple[Key, np.ndarray]] = []
         corrupt: list[tuple[Path, str]] = []
@@ -119,6 +130,7 @@ class TileStore:
         with self._lock:
             self._stats.cache_hits += hits
             self._stats.cache_misses += misses
+            self._evict_to(self.cache_limit)  # the auto bound shrinks with the window
         if ahead:
             self._request_prefetch(ahead, wanted_codes)
         removed_keys = [decode_key(c) for c in removed]
@@ -129,17 +141,22 @@ class TileStore:
         """Current bound of the cache [bytes]."""
         if self._cache_mb > 0.0:
             return int(self._cache_mb * 2**20)
-        return max(self._loaded_bytes, 2**20)
+        return max(int(self._loaded_bytes * AUTO_CACHE_FRACTION), AUTO_CACHE_MIN_BYTES)
 
     def loaded(self) -> list[tuple[Key, np.ndarray]]:
         """A snapshot of the loaded tiles, sorted by key."""
         with self._lock:
             return sorted((decode_key(c), p) for c, p in self._loaded.items())
 
+    def point_arrays(self) -> list[np.ndarray]:
+        """A snapshot of the loaded tiles' arrays (in no particular order; the arrays are never modified)."""
+        with self._lock:
+            return list(self._loaded.values())
+
     @property
     def dtype(self) -> np.dtype:
-        """Point dtype of the tiles (x, y, z float32 before any tile was read)."""
-        return self._dtype or np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
+        """Point dtype of the tiles (XYZ_DTYPE when xyz_only or before any tile was read)."""
+        return self._dtype if self._dtype is not None else XYZ_DTYPE
 
     def merged(self) -> np.ndarray:
         """All loaded points in one array (key order); empty with the tiles' dtype when none."""
@@ -178,7 +195,7 @@ class TileStore:
         """Points of one tile, or (None, reason) when the file cannot be used."""
         path = self._path(code)
         try:
-            points = read_pcd(path).points
+            points = read_tile(path, self._xyz_only)
         except (PcdError, OSError) as err:
             return None, str(err)
         with self._lock:
@@ -197,13 +214,23 @@ class TileStore:
             self._cache_drop(key)
             return points
 
-    def _cache_put(self, key: int, points: np.ndarray, protected: set[int] | None = None) -> bool:
+    def _cache_put(
+        self, key: int, points: np.ndarray, protected: set[int] | None = None, spare_room_only: bool = False
+    ) -> bool:
         """Inserts under the lock, evicting least recently used tiles; returns False (and keeps the cache)
-        when that would evict a ``protected`` tile or the tile alone exceeds the limit."""
+        when that would evict a ``protected`` tile or the tile alone exceeds the limit. ``spare_room_only``
+        (a tile that left the window): insert it only if nothing must be evicted, as the next to go."""
         self._cache_drop(key)
         limit = self.cache_limit
         if points.nbytes > limit:
             return False
+        if spare_room_only:
+            if self._cache_bytes + points.nbytes > limit:
+                return False
+            self._cache[key] = points
+            self._cache.move_to_end(key, last=False)
+            self._cache_bytes += points.nbytes
+            return True
         while self._cache_bytes + points.nbytes > limit:
             oldest = next(iter(self._cache))
             if protected is not None and oldest in protected:
@@ -212,6 +239,10 @@ class TileStore:
         self._cache[key] = points
         self._cache_bytes += points.nbytes
         return True
+
+    def _evict_to(self, limit: int) -> None:
+        while self._cache_bytes > limit:
+            self._cache_bytes -= self._cache.popitem(last=False)[1].nbytes
 
     def _cache_drop(self, key: int) -> None:
         stale = self._cache.pop(key, None)

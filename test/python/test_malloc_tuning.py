@@ -58,3 +58,26 @@ def test_reused_large_buffers_do_not_fault_pages_in_again():
     # of 4 KiB pages per round).
     assert _faults_after_warm_up("tuned") < 64
     assert _faults_after_warm_up("default") > 4 * 64
+
+
+TRIM_PROGRAM = """
+from grid_puzzle_localization.malloc_tuning import limit_arenas, pin_mmap_threshold, trim_heap
+
+def rss_kib():
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("VmRSS:"))
+
+assert pin_mmap_threshold() and limit_arenas(1)
+chunks = [bytearray(16000) for _ in range(5000)]  # 80 MB of heap chunks (below the mmap threshold)
+del chunks[::2]  # every other one freed: 16 kB holes between live chunks, nothing free at the heap's top
+# 40 MB freed; free() only gives back what lies past the last live chunk, so the holes stay resident.
+held = rss_kib()
+assert trim_heap()
+released = held - rss_kib()
+assert released > 25 * 1024, f"malloc_trim gave back only {released} KiB of 40 MB of holes"
+"""
+
+
+def test_trim_gives_the_holes_in_the_heap_back_to_the_os():
+    result = subprocess.run([sys.executable, "-c", TRIM_PROGRAM], capture_output=True, text=True, check=False)
+    assert result.returncode == 0, result.stderr

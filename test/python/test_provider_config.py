@@ -55,6 +55,7 @@ def test_wrong_types_name_the_parameter(given, match):
         (ProviderConfig(), "tiles/dir is empty"),
         (ProviderConfig(pose_source="gps", tiles=ProviderConfig().tiles.__class__(dir="x")), "pose_source"),
         (ProviderConfig(tiles=ProviderConfig().tiles.__class__(dir="x", grid_size=-1.0)), "grid_size"),
+        (ProviderConfig(tiles=ProviderConfig().tiles.__class__(dir="x"), map_cloud_period=-0.5), "map_cloud_period"),
     ],
 )
 def test_checked_rejects_bad_values(config, match):

@@ -11,6 +11,7 @@ from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.pcd import read_pcd
 from grid_puzzle_localization.synthetic_tiles import write_tiles
 from grid_puzzle_localization.tile_directory import open_tile_directory
+from grid_puzzle_localization.tile_reader import XYZ_DTYPE
 from grid_puzzle_localization.tile_store import TileStore
 from grid_puzzle_localization.window import PoseSample, WindowConfig, WindowTracker, compute_window
 
@@ -27,6 +28,15 @@ def holey_map(tmp_path_factory):
     for foreign in ("README.pcd", "2.0_3.0.pcd", "1.0_3.pcd", "notes.txt"):
         (d / foreign).write_text("not a tile")
     return d
+
+
+def file_xyz(path):
+    """x, y, z of a tile file as float32 records, through the general PCD reader."""
+    points = read_pcd(path).points
+    out = np.empty(len(points), dtype=XYZ_DTYPE)
+    for name in "xyz":
+        out[name] = points[name]
+    return out
 
 
 def random_path(rng, steps):
@@ -75,7 +85,8 @@ def test_loaded_set_equals_window_and_listing_after_random_paths(holey_map, seed
             assert set(mirror) == truth
             assert store.stats().cache_bytes <= store.cache_limit
         for key, points in mirror.items():
-            assert read_pcd(store.directory.tile_path(key)).points.tobytes() == points.tobytes()
+            assert points.dtype == XYZ_DTYPE
+            assert file_xyz(store.directory.tile_path(key)).tobytes() == points.tobytes()
     finally:
         store.close()
 
@@ -94,6 +105,27 @@ def test_straight_drive_is_served_from_the_prefetch_cache(holey_map):
         stats = store.stats()
         assert misses_after_start == 0
         assert stats.cache_hits > 0 and stats.prefetched > 0
+    finally:
+        store.close()
+
+
+def test_tiles_left_behind_never_evict_tiles_read_ahead(tmp_path):
+    """A cache that holds little more than the next column: tiles leaving the window must not push
+    out the column the prefetcher read for the next update."""
+    write_tiles(tmp_path, [(i, j) for i in range(40) for j in range(11)], S, count=20)  # 240 B of x y z
+    tile_bytes = 20 * XYZ_DTYPE.itemsize
+    store = TileStore(open_tile_directory(tmp_path, S), cache_mb=12 * tile_bytes / 2**20)
+    tracker = WindowTracker(WindowConfig(n=2, k=2), S)
+    misses = []
+    try:
+        for step in range(40):
+            window = tracker.update(PoseSample(1.0 + 1.5 * step, 11.0))  # rows 3..7; turns reach 1..9
+            if window is None:
+                continue
+            delta = store.update(window, tracker.predicted_windows())
+            misses.append(delta.misses)
+            assert store.wait_prefetch_idle(timeout=30.0)
+        assert sum(misses[2:]) == 0 and store.stats().cache_hits > 0
     finally:
         store.close()
 
@@ -128,19 +160,38 @@ def test_corrupt_tile_is_skipped_and_reported_once(tmp_path):
         store.close()
 
 
-def test_tile_with_other_fields_is_reported_not_merged(tmp_path):
+@pytest.fixture
+def mixed_fields(tmp_path):
+    """Tile (0, 0) with x y z intensity (5 points), tile (1, 0) with x y z only (3 points)."""
     write_tiles(tmp_path, [(0, 0)], S, count=5)
     from grid_puzzle_localization.pcd import write_pcd
 
     odd = np.zeros(3, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
     odd["x"] = 3.0
     write_pcd(tmp_path / "3.0_1.0.pcd", odd)
-    store = TileStore(open_tile_directory(tmp_path, S), prefetch=False)
+    return tmp_path
+
+
+def test_all_fields_kept_on_request_and_a_tile_with_other_fields_is_reported_not_merged(mixed_fields):
+    store = TileStore(open_tile_directory(mixed_fields, S), prefetch=False, xyz_only=False)
     try:
         delta = store.update(compute_window(1.0, 1.0, None, S, 1, 0))
         assert [k for k, _ in delta.added] == [(0, 0)]
         assert len(delta.newly_corrupt) == 1 and "differ" in delta.newly_corrupt[0][1]
-        assert len(store.merged()) == 5
+        assert store.merged().tobytes() == read_pcd(mixed_fields / "1.0_1.0.pcd").points.tobytes()
+        assert store.dtype.names == ("x", "y", "z", "intensity")
+    finally:
+        store.close()
+
+
+def test_xyz_only_store_merges_tiles_of_any_fields(mixed_fields):
+    store = TileStore(open_tile_directory(mixed_fields, S), prefetch=False)
+    try:
+        delta = store.update(compute_window(1.0, 1.0, None, S, 1, 0))
+        assert sorted(k for k, _ in delta.added) == [(0, 0), (1, 0)] and not delta.newly_corrupt
+        want = np.concatenate([file_xyz(mixed_fields / "1.0_1.0.pcd"), file_xyz(mixed_fields / "3.0_1.0.pcd")])
+        assert store.merged().tobytes() == want.tobytes() and store.dtype == XYZ_DTYPE
+        assert sorted(len(p) for p in store.point_arrays()) == [3, 5]
     finally:
         store.close()
 
@@ -255,19 +306,22 @@ def test_turn_into_a_neighbouring_sector_is_served_from_the_prefetch_cache(holey
         store.close()
 
 
-def test_auto_cache_is_bounded_by_the_loaded_window(tmp_path):
-    write_tiles(tmp_path, [(i, j) for i in range(30) for j in range(6)], S, count=3000)  # 48 kB tiles
+def test_auto_cache_is_bounded_by_a_fraction_of_the_loaded_window(tmp_path):
+    from grid_puzzle_localization.tile_store import AUTO_CACHE_FRACTION, AUTO_CACHE_MIN_BYTES
+
+    write_tiles(tmp_path, [(i, j) for i in range(30) for j in range(10)], S, count=8000)  # 96 kB of x y z
     store = TileStore(open_tile_directory(tmp_path, S))
-    tracker = WindowTracker(WindowConfig(n=2, k=3), S)
-    fullest = 0.0
+    tracker = WindowTracker(WindowConfig(n=4, k=4), S)  # 9 x 13 tiles, 11 MB
+    fullest, fraction_binds = 0.0, False
     try:
         for step in range(40):
-            store.update(tracker.update(PoseSample(1.0 + 1.5 * step, 5.0)), tracker.predicted_windows())
+            store.update(tracker.update(PoseSample(1.0 + 1.5 * step, 9.0)), tracker.predicted_windows())
             store.wait_prefetch_idle(timeout=30.0)
             stats = store.stats()
-            limit = max(stats.bytes, 2**20)
+            limit = max(stats.bytes * AUTO_CACHE_FRACTION, AUTO_CACHE_MIN_BYTES)
             assert stats.cache_bytes <= limit
             fullest = max(fullest, stats.cache_bytes / limit)
-        assert fullest > 0.8  # the drive left more tiles behind than fit: the bound was what held
+            fraction_binds = fraction_binds or stats.bytes * AUTO_CACHE_FRACTION > AUTO_CACHE_MIN_BYTES
+        assert fraction_binds and fullest > 0.8  # more tiles were read ahead and left behind than fit
     finally:
         store.close()

@@ -61,7 +61,12 @@ def expected_bounds(x, y, heading_deg):
 
 
 def tile_file_points(directory, key):
-    return read_pcd(os.path.join(directory, tile_filename(*key, S))).points
+    """x, y, z of a tile file (the provider keeps only those by default, as float32)."""
+    points = read_pcd(os.path.join(directory, tile_filename(*key, S))).points
+    out = np.empty(len(points), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
+    for name in "xyz":
+        out[name] = points[name]
+    return out
 
 
 def xyz_sorted(points):

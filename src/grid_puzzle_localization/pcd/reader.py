@@ -71,17 +71,7 @@ class PcdChunks:
 
     def _binary(self) -> Iterator[np.ndarray]:
         h = self.header
-        available = os.path.getsize(self.path) - h.header_bytes
-        if available < h.data_bytes:
-            raise PcdError(
-                f"{self.path}: truncated: POINTS {h.points} x {h.record_bytes} bytes needs {h.data_bytes} bytes of data"
-                f" but the file holds {available}; re-export or re-download the file"
-            )
-        if available > h.data_bytes:
-            raise PcdError(
-                f"{self.path}: POINTS {h.points} disagrees with the data: {available} data bytes hold"
-                f" {available / h.record_bytes:g} records of {h.record_bytes} bytes"
-            )
+        check_binary_size(h, os.path.getsize(self.path) - h.header_bytes, self.path)
         if h.points == 0:
             return
         records = np.memmap(self.path, dtype=h.dtype, mode="r", offset=h.header_bytes, shape=(h.points,))
@@ -141,6 +131,20 @@ def read_compressed(path: str | os.PathLike, h: PcdHeader) -> np.ndarray:
         out[name] = column.reshape((h.points, *field.shape))
         offset += column.nbytes
     return out
+
+
+def check_binary_size(h: PcdHeader, available: int, path: str | os.PathLike) -> None:
+    """Raises PcdError unless a ``binary`` data section of ``available`` bytes holds exactly POINTS records."""
+    if available < h.data_bytes:
+        raise PcdError(
+            f"{path}: truncated: POINTS {h.points} x {h.record_bytes} bytes needs {h.data_bytes} bytes of data"
+            f" but the file holds {available}; re-export or re-download the file"
+        )
+    if available > h.data_bytes:
+        raise PcdError(
+            f"{path}: POINTS {h.points} disagrees with the data: {available} data bytes hold"
+            f" {available / h.record_bytes:g} records of {h.record_bytes} bytes"
+        )
 
 
 def check_xyz(header: PcdHeader, path: str | os.PathLike) -> None:

@@ -51,7 +51,7 @@ def _fields_of(dtype: np.dtype) -> tuple[PointField, ...]:
     return tuple(fields)
 
 
-def _byte_order(dtype: np.dtype) -> bool:
+def byte_order_is_big(dtype: np.dtype) -> bool:
     """True when the fields are big-endian. Mixed byte orders are refused."""
     orders = {dtype.fields[n][0].base.byteorder for n in dtype.names} - {"|"}
     big = {o for o in orders if o == ">" or (o == "=" and not _LITTLE)}
@@ -82,7 +82,7 @@ def cloud_from_parts(
     msg.height = 1
     msg.width = sum(len(p) for p in parts)
     msg.fields = fields_of(dtype)
-    msg.is_bigendian = _byte_order(dtype)
+    msg.is_bigendian = byte_order_is_big(dtype)
     msg.point_step = dtype.itemsize
     msg.row_step = msg.point_step * msg.width
     msg.data = b"".join(memoryview(p) for p in parts)

@@ -15,18 +15,18 @@ from __future__ import annotations
 import math
 import sys
 import threading
+import time
 
 import rospy
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger, TriggerResponse
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.malloc_tuning import pin_mmap_threshold
+from grid_puzzle_localization.malloc_tuning import limit_arenas, pin_mmap_threshold, trim_heap
 from grid_puzzle_localization.msg import ProviderStatus, TileDelta
 from grid_puzzle_localization.provider_config import ProviderConfig, load_config
-from grid_puzzle_localization.ros.cloud_msg import cloud_from_parts
+from grid_puzzle_localization.ros.map_cloud_publisher import MapCloudPublisher
 from grid_puzzle_localization.ros.provider_msgs import provider_status, stamped, tile_delta
 from grid_puzzle_localization.tile_directory import open_tile_directory
 from grid_puzzle_localization.tile_store import StoreDelta, TileStore
@@ -77,7 +77,7 @@ class MapProviderNode:
                 ", ".join(self.directory.unparsable[:10]),
             )
         self.tracker = WindowTracker(self.config.window, self.s)
-        self.store = TileStore(self.directory, tiles.cache_mb)
+        self.store = TileStore(self.directory, tiles.cache_mb, xyz_only=tiles.xyz_only)
         self.frame = self.config.map_frame
         # Serialises store updates and every publish on tile_delta, so a reset sent to a new subscriber
         # (from rospy's connection thread) or by ~resend is consistent with the delta stream.
@@ -91,8 +91,8 @@ class MapProviderNode:
         self.delta_pub = rospy.Publisher(
             "tile_delta", TileDelta, queue_size=50, subscriber_listener=ResetOnSubscribe(self)
         )
-        self.cloud_pub = (
-            rospy.Publisher("map_cloud", PointCloud2, queue_size=1, latch=True)
+        self.map_cloud = (
+            MapCloudPublisher(self.store, self.frame, self.config.map_cloud_period)
             if self.config.publish_map_cloud
             else None
         )
@@ -156,12 +156,14 @@ class MapProviderNode:
                 pose, self._latest = self._latest, None
             if pose is None:
                 continue
+            start = time.perf_counter()
             window = self.tracker.update(pose)
             if window is not None:
-                self._serve(pose, window)
+                self._serve(pose, window, start)
         self.store.close()
 
-    def _serve(self, pose: PoseSample, window: Window) -> None:
+    def _serve(self, pose: PoseSample, window: Window, start: float) -> None:
+        """Updates the store and publishes; ``start``: perf_counter() when the update began."""
         stamp = rospy.Time.from_sec(pose.t) if pose.t > 0.0 else rospy.Time.now()
         with self._lock:
             delta = self.store.update(window, self.tracker.predicted_windows())
@@ -176,13 +178,13 @@ class MapProviderNode:
                     )
                 )
         self._report(pose, window, delta)
-        if self.cloud_pub is not None and (first or delta.added or delta.removed):
-            self.cloud_pub.publish(
-                cloud_from_parts(
-                    [p for _, p in self.store.loaded()], self.store.dtype, header=stamped(self.frame, stamp)
-                )
-            )
-        self.status_pub.publish(provider_status(stamped(self.frame, stamp), window, self.store.stats(), delta.load_ms))
+        if self.map_cloud is not None and (first or delta.added or delta.removed):
+            self.map_cloud.changed(stamp)
+        trim_heap()  # tiles evicted from the cache and message buffers leave holes in the heap
+        update_ms = (time.perf_counter() - start) * 1e3
+        self.status_pub.publish(
+            provider_status(stamped(self.frame, stamp), window, self.store.stats(), delta.load_ms, update_ms)
+        )
 
     def _report(self, pose: PoseSample, window: Window, delta: StoreDelta) -> None:
         for path, reason in delta.newly_corrupt:
@@ -222,6 +224,7 @@ class MapProviderNode:
 
 def main() -> None:
     pin_mmap_threshold()
+    limit_arenas(1)  # before rospy starts its threads
     rospy.init_node("grid_puzzle_map_provider")
     try:
         config = load_config(lambda name, default: rospy.get_param("~" + name, default))

@@ -10,7 +10,7 @@ from std_msgs.msg import Header
 
 from grid_puzzle_localization.grid import tile_stem
 from grid_puzzle_localization.msg import ProviderStatus, TileDelta
-from grid_puzzle_localization.ros.cloud_msg import array_to_cloud
+from grid_puzzle_localization.ros.streamed_msgs import StreamedTileDelta
 from grid_puzzle_localization.tile_store import StoreStats
 from grid_puzzle_localization.window import Window
 
@@ -26,17 +26,28 @@ def tile_delta(
     added: list[tuple[Key, np.ndarray]],
     removed: list[Key],
 ) -> TileDelta:
-    msg = TileDelta(header=header, revision=revision, reset=reset, grid_size=s)
-    msg.added_ids = [tile_stem(i, j, s) for (i, j), _ in added]
-    msg.added_clouds = [
-        array_to_cloud(points, header=Header(frame_id=header.frame_id, stamp=header.stamp)) for _, points in added
-    ]
-    msg.removed_ids = [tile_stem(i, j, s) for i, j in removed]
-    msg.i_min, msg.i_max, msg.j_min, msg.j_max = window.bounds
-    return msg
+    """A TileDelta whose added clouds are serialised straight from the tile arrays (streamed_msgs.py).
+    The clouds are dense: the tile reader keeps only points with finite x, y, z."""
+    i_min, i_max, j_min, j_max = window.bounds
+    return StreamedTileDelta(
+        [points for _, points in added],
+        True,
+        header=header,
+        revision=revision,
+        reset=reset,
+        grid_size=s,
+        added_ids=[tile_stem(i, j, s) for (i, j), _ in added],
+        removed_ids=[tile_stem(i, j, s) for i, j in removed],
+        i_min=i_min,
+        i_max=i_max,
+        j_min=j_min,
+        j_max=j_max,
+    )
 
 
-def provider_status(header: Header, window: Window, stats: StoreStats, load_ms: float) -> ProviderStatus:
+def provider_status(
+    header: Header, window: Window, stats: StoreStats, load_ms: float, update_ms: float
+) -> ProviderStatus:
     msg = ProviderStatus(header=header)
     msg.i_min, msg.i_max, msg.j_min, msg.j_max = window.bounds
     msg.theta = window.theta if math.isfinite(window.theta) else math.nan
@@ -45,6 +56,7 @@ def provider_status(header: Header, window: Window, stats: StoreStats, load_ms: 
     msg.points = stats.points
     msg.bytes = stats.bytes
     msg.load_ms = load_ms
+    msg.update_ms = update_ms
     msg.cache_hits = stats.cache_hits
     msg.cache_misses = stats.cache_misses
     msg.corrupt_tiles = list(stats.corrupt)

@@ -1,0 +1,124 @@
+"""Streamed messages against genpy's own serialisation of the equivalent plain messages (byte for byte)."""
+
+import io
+
+import genpy
+import numpy as np
+import pytest
+from grid_puzzle_localization.msg import TileDelta
+from rospy.msg import serialize_message
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Header
+
+from grid_puzzle_localization.ros.cloud_msg import array_to_cloud, cloud_from_parts, cloud_to_array
+from grid_puzzle_localization.ros.streamed_msgs import StreamedCloud, StreamedTileDelta
+
+XYZI = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4")])
+MIXED = np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("ring", "<u2"), ("normal", "<f4", (3,))])
+
+
+def points(n, dtype, seed):
+    rng = np.random.default_rng(seed)
+    out = np.zeros(n, dtype=dtype)
+    for name in dtype.names:
+        out[name] = rng.uniform(-50, 50, out[name].shape)
+    return out
+
+
+def header():
+    return Header(seq=7, stamp=genpy.Time(1234, 567_000_000), frame_id="map")
+
+
+def wire(msg, seq=None, buff=None):
+    """The bytes a message serialises to; with ``seq``, as rospy frames them for the socket."""
+    buff = io.BytesIO() if buff is None else buff
+    if seq is None:
+        msg.serialize(buff)
+    else:
+        serialize_message(buff, seq, msg)
+    return buff.getvalue()
+
+
+@pytest.mark.parametrize("dtype", [XYZI, MIXED])
+@pytest.mark.parametrize("sizes", [[], [0], [5], [3, 0, 17, 1]])
+def test_streamed_cloud_serialises_like_the_plain_cloud(dtype, sizes):
+    parts = [points(n, dtype, seed) for seed, n in enumerate(sizes)]
+    plain = cloud_from_parts(parts, dtype, header=header())
+    streamed = StreamedCloud(header(), dtype, lambda: parts, is_dense=True)
+    assert wire(streamed) == wire(plain)
+    back = PointCloud2().deserialize(wire(streamed))
+    want = np.concatenate(parts) if parts else np.empty(0, dtype)
+    assert cloud_to_array(back).tobytes() == want.tobytes()
+
+
+def test_streamed_cloud_is_framed_by_rospy_like_the_plain_cloud_in_a_reused_buffer():
+    parts = [points(40, XYZI, 1), points(9, XYZI, 2)]
+    used = io.BytesIO()
+    used.write(b"x" * 100_000)  # rospy reuses its buffer: seek(0) and truncate(0) after each publish
+    used.seek(0)
+    used.truncate(0)
+    streamed = wire(StreamedCloud(header(), XYZI, lambda: parts, True), seq=42, buff=used)
+    assert streamed == wire(cloud_from_parts(parts, XYZI, header=header()), seq=42)
+
+
+def test_a_streamed_cloud_serialises_the_source_as_it_is_at_that_moment():
+    state = {"parts": [points(4, XYZI, 1)]}
+    msg = StreamedCloud(header(), XYZI, lambda: state["parts"], True)
+    first = wire(msg)
+    state["parts"] = [points(4, XYZI, 1), points(6, XYZI, 3)]
+    second = PointCloud2().deserialize(wire(msg))
+    assert PointCloud2().deserialize(first).width == 4
+    assert second.width == 10
+    assert cloud_to_array(second).tobytes() == np.concatenate(state["parts"]).tobytes()
+
+
+def test_is_dense_is_the_callers_statement():
+    msg = StreamedCloud(header(), XYZI, lambda: [points(3, XYZI, 0)], is_dense=False)
+    assert not PointCloud2().deserialize(wire(msg)).is_dense
+
+
+def test_parts_of_another_dtype_or_not_contiguous_are_refused():
+    with pytest.raises(ValueError, match="contiguous array"):
+        wire(StreamedCloud(header(), XYZI, lambda: [points(4, MIXED, 0)], True))
+    with pytest.raises(ValueError, match="contiguous array"):
+        wire(StreamedCloud(header(), XYZI, lambda: [points(8, XYZI, 0)[::2]], True))
+
+
+def plain_delta(arrays, **fields):
+    h = fields["header"]
+    clouds = [array_to_cloud(a, header=Header(frame_id=h.frame_id, stamp=h.stamp)) for a in arrays]
+    return TileDelta(added_clouds=clouds, **fields)
+
+
+DELTA_FIELDS = dict(
+    revision=12,
+    reset=True,
+    grid_size=2.0,
+    added_ids=["1_3", "-1_-3", "5_7"],
+    removed_ids=["9_9", "11_-1"],
+    i_min=-3,
+    i_max=40,
+    j_min=-(2**40),
+    j_max=2**40,
+)
+
+
+@pytest.mark.parametrize("dtype", [XYZI, MIXED])
+def test_streamed_tile_delta_serialises_like_the_plain_delta(dtype):
+    arrays = [points(n, dtype, seed) for seed, n in enumerate([10, 0, 33])]
+    fields = dict(DELTA_FIELDS, header=header())
+    streamed = StreamedTileDelta(arrays, True, **fields)
+    assert wire(streamed, seq=3) == wire(plain_delta(arrays, **dict(DELTA_FIELDS, header=header())), seq=3)
+    back = TileDelta().deserialize(wire(streamed))
+    assert [cloud_to_array(c).tobytes() for c in back.added_clouds] == [a.tobytes() for a in arrays]
+    assert list(back.removed_ids) == DELTA_FIELDS["removed_ids"] and back.j_min == -(2**40)
+
+
+def test_an_empty_streamed_delta_serialises_like_the_plain_one():
+    fields = dict(DELTA_FIELDS, added_ids=[], removed_ids=[], reset=False, header=header())
+    assert wire(StreamedTileDelta([], True, **fields)) == wire(plain_delta([], **fields))
+
+
+def test_a_streamed_delta_needs_one_array_per_added_id():
+    with pytest.raises(ValueError, match="3 added ids but 2 point arrays"):
+        StreamedTileDelta([points(1, XYZI, 0)] * 2, True, **dict(DELTA_FIELDS, header=header()))
