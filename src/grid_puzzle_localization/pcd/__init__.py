@@ -3,11 +3,11 @@
 Points are numpy structured arrays whose field names and dtypes are those of the file. Errors are
 ``grid_puzzle_localization.errors.PcdError`` naming the file and the problem.
 
-The names below are imported from their submodule on first use (PEP 562), so a process that only
-reads (the tile provider) does not load the writer, the merger and what they import.
+The names below are imported from their submodule on first use (lazy_exports), so a process that
+only reads (the tile provider) does not load the writer, the merger and what they import.
 """
 
-import importlib
+from grid_puzzle_localization.lazy_exports import lazy_exports
 
 _EXPORTS = {
     "ENCODINGS": "header",
@@ -24,12 +24,4 @@ _EXPORTS = {
 }
 __all__ = sorted(_EXPORTS)
 
-
-def __getattr__(name: str):
-    if name not in _EXPORTS:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-
-
-def __dir__() -> list[str]:
-    return sorted([*globals(), *_EXPORTS])
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -1,10 +1,10 @@
 """Grid puzzle map tiling: cut a global map into tiles (``tile_map``), read the tile index
 (``load_tile_index``; schema in the index module) and verify conservation (``verify_tiles``).
 
-The names below are imported from their submodule on first use (PEP 562), so a process that only
-reads the index (the tile provider) does not load the tiler and its progress bar."""
+The names below are imported from their submodule on first use (lazy_exports), so a process that
+only reads the index (the tile provider) does not load the tiler and its progress bar."""
 
-import importlib
+from grid_puzzle_localization.lazy_exports import lazy_exports
 
 _EXPORTS = {
     "AUTOWARE_METADATA_FILE": "index",
@@ -20,12 +20,4 @@ _EXPORTS = {
 }
 __all__ = sorted(_EXPORTS)
 
-
-def __getattr__(name: str):
-    if name not in _EXPORTS:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module(f"{__name__}.{_EXPORTS[name]}"), name)
-
-
-def __dir__() -> list[str]:
-    return sorted([*globals(), *_EXPORTS])
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
