@@ -315,7 +315,7 @@ def hardware() -> dict:
     return {
         "cpu_model": model,
         "cores": os.cpu_count(),
-        "node_threads": "worker + prefetcher (+ rospy's)",
+        "node_threads": "worker, prefetcher, map_cloud publisher (+ rospy's)",
         "python": platform.python_version(),
         "load_average_1_5_15_at_end": [round(v, 2) for v in os.getloadavg()],
     }

@@ -3,8 +3,9 @@
 Subscribes to ``odom`` (nav_msgs/Odometry; then also to ``initialpose``, which seeds the first window
 before the localizer has a map) or ``pose`` (PoseWithCovarianceStamped), all in the map frame.
 Callbacks only store the latest pose; a worker thread recomputes the window (window.py), updates the
-tile store (tile_store.py) and publishes ``tile_delta`` (TileDelta), the latched ``map_cloud`` and the
-latched ``~status``. Delta protocol: every broadcast delta increments ``revision`` by one; a new
+tile store (tile_store.py) and publishes ``tile_delta`` (TileDelta) and the latched ``~status``, and
+tells the map_cloud publisher (map_cloud_publisher.py, a thread of its own) that the window changed.
+Delta protocol: every broadcast delta increments ``revision`` by one; a new
 subscriber first receives a ``reset`` delta of the whole window carrying the current revision; the
 service ``~resend`` (std_srvs/Trigger) broadcasts a reset delta so a subscriber that saw a revision gap
 can recover.
