@@ -18,13 +18,13 @@ import argparse
 import itertools
 import json
 import os
-import platform
 import statistics
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from hardware import cpu_model
 from scipy.spatial import cKDTree
 
 from grid_puzzle_localization.blocks.block_cache import BlockCache
@@ -40,14 +40,6 @@ TILE = 25.0  # [m] side of the data set's tiles
 SCAN_RADIUS = 30.0  # [m] pseudo-scan range
 WALK_TILES = 80  # occupied tiles the depth-first walk visits
 STEP = 2.0  # [m] between keyframes on the walk
-
-
-def cpu_model() -> str:
-    with open("/proc/cpuinfo", encoding="utf-8") as f:
-        for line in f:
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    return platform.processor()
 
 
 def load_map() -> tuple[np.ndarray, list[Path]]:

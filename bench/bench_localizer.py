@@ -8,23 +8,16 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import subprocess
 import tempfile
 from pathlib import Path
 
 import numpy as np
+from hardware import cpu_model
 
 from grid_puzzle_localization import synthetic_scene as ss
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def cpu_model() -> str:
-    for line in Path("/proc/cpuinfo").read_text().splitlines():
-        if line.startswith("model name"):
-            return line.split(":", 1)[1].strip()
-    return platform.processor() or "unknown"
 
 
 # White noise of the simulated gyro [rad/s], about a MEMS IMU's at 100 Hz.

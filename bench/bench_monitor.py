@@ -5,25 +5,17 @@ repeats of the time per sample, per process, and the monitor's own CPU share at 
 
 import json
 import os
-import platform
 import subprocess
 import sys
 import time
 
 import numpy as np
+from hardware import cpu_model
 
 from grid_puzzle_localization.monitor import Monitor, Target
 
 HOLDER = "import sys, time; block = b'\\x01' * (64 << 20); print('ready', flush=True); time.sleep(3600)"
 REPEATS = 40
-
-
-def cpu_model() -> str:
-    with open("/proc/cpuinfo") as f:
-        for line in f:
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    return platform.processor()
 
 
 def main() -> None:

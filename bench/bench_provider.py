@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import rospy
 from grid_puzzle_localization.msg import ProviderStatus, TileDelta
+from hardware import cpu_model
 from nav_msgs.msg import Odometry
 
 from grid_puzzle_localization.experiment.processes import ManagedProcess, wait_for
@@ -306,14 +307,8 @@ def scenario(core, log_dir: Path, args: argparse.Namespace, width: float, height
 
 
 def hardware() -> dict:
-    model = platform.processor()
-    try:
-        with open("/proc/cpuinfo") as f:
-            model = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), model)
-    except OSError:
-        pass
     return {
-        "cpu_model": model,
+        "cpu_model": cpu_model(),
         "cores": os.cpu_count(),
         "node_threads": "worker, prefetcher, map_cloud publisher (+ rospy's)",
         "python": platform.python_version(),

@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from hardware import cpu_model
 
 from grid_puzzle_localization.malloc_tuning import reuse_large_buffers
 from grid_puzzle_localization.sim import worlds
@@ -33,14 +34,6 @@ from grid_puzzle_localization.sim.raycast import RayCaster
 from grid_puzzle_localization.sim.scenario import MOUNTS, ScenarioConfig, _rng, generate
 from grid_puzzle_localization.sim.sensors import SENSORS
 from grid_puzzle_localization.sim.trajectory import localization_trajectory
-
-
-def _cpu_model() -> str:
-    with open("/proc/cpuinfo") as f:
-        for line in f:
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    return platform.processor()
 
 
 def _raycast(threads: int, repeats: int, sweeps: int) -> dict:
@@ -122,7 +115,7 @@ def main() -> None:
     out["urban_hdl32"] = _scenario("urban", args.duration, args.threads, args.repeats)
     out["peak_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
     out["hardware"] = {
-        "cpu": _cpu_model(),
+        "cpu": cpu_model(),
         "cores": os.cpu_count(),
         "load_average_1min_at_end": round(os.getloadavg()[0], 2),  # the CPU may be shared
         "python": platform.python_version(),

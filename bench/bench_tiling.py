@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import statistics
 import subprocess
 import sys
@@ -22,19 +21,14 @@ import tempfile
 import time
 from pathlib import Path
 
+from hardware import cpu_model
+
 from grid_puzzle_localization.pcd import merge_pcds
 from grid_puzzle_localization.tiling import load_tile_index
 
 ROOT = Path(__file__).resolve().parents[1]
 CAMPUS_TILES = ROOT.parent / "shared" / "data" / "real" / "nova_utd_tiles" / "tiles"
 GPM = "import sys; from grid_puzzle_localization.cli import main; sys.exit(main())"
-
-
-def cpu_model() -> str:
-    for line in Path("/proc/cpuinfo").read_text().splitlines():
-        if line.startswith("model name"):
-            return line.split(":", 1)[1].strip()
-    return platform.processor()
 
 
 def run_child(args: list[str]) -> tuple[float, float, dict]:
