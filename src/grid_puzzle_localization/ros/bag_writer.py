@@ -10,7 +10,6 @@ same inputs give the same bytes. Messages must be written in non-decreasing reco
 from __future__ import annotations
 
 import io
-import struct
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,9 +18,10 @@ import rospy
 from geometry_msgs.msg import TransformStamped
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, PointCloud2
+from std_msgs.msg import Header
 from tf2_msgs.msg import TFMessage
 
-from grid_puzzle_localization.ros.cloud_msg import fields_of
+from grid_puzzle_localization.ros.streamed_msgs import StreamedCloud
 
 
 @dataclass(frozen=True)
@@ -128,23 +128,13 @@ class ScenarioBag:
         self._bag.write("/tf_static", msg, _stamp(t), connection_header=header)
 
     def write_points(self, stamp_ns: int, record_ns: int, points: np.ndarray) -> None:
-        """A sweep (structured array, lidar frame) stamped at its start, recorded at ``record_ns``. genpy
-        serializes the message without its data; the points' bytes are spliced in with one copy."""
-        msg = PointCloud2()
-        msg.header.stamp = rospy.Time(nsecs=stamp_ns)
-        msg.header.frame_id = self.names.lidar_frame
-        msg.height, msg.width = 1, len(points)
-        msg.fields = fields_of(points.dtype)
-        msg.is_bigendian = False
-        msg.point_step = points.dtype.itemsize
-        msg.row_step = msg.point_step * len(points)
-        msg.is_dense = True
-        buffer = io.BytesIO()
-        msg.serialize(buffer)
-        empty = buffer.getvalue()  # ... uint32 data length (0), is_dense (1 byte)
+        """A sweep (structured array, lidar frame) stamped at its start, recorded at ``record_ns``,
+        serialised straight from the array (streamed_msgs)."""
+        header = Header(stamp=rospy.Time(nsecs=stamp_ns), frame_id=self.names.lidar_frame)
         data = np.ascontiguousarray(points)
-        serialized = b"".join([empty[:-5], struct.pack("<I", data.nbytes), memoryview(data).cast("B"), empty[-1:]])
-        raw = (PointCloud2._type, serialized, PointCloud2._md5sum, PointCloud2)
+        buffer = io.BytesIO()
+        StreamedCloud(header, data.dtype, lambda: [data], is_dense=True).serialize(buffer)
+        raw = (PointCloud2._type, buffer.getvalue(), PointCloud2._md5sum, PointCloud2)
         self._bag.write(self.names.points_topic, raw, rospy.Time(nsecs=record_ns), raw=True)
 
     def write_imu(
