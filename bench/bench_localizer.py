@@ -1,7 +1,8 @@
 """`make bench-localizer`: a synthetic drive (grid_puzzle_localization.synthetic_scene) through the core
 localizer without roscore. Writes the scans, the gyro samples and the map to a temporary input file, runs the
 C++ bench_localizer once per map mode (cloud: the merged window rebuilt per change; tiles: incremental deltas)
-and prints one JSON line per mode, with the machine it ran on."""
+and once as the control (repeat: the same scan against a fixed map at every slot, whose spread is the machine's
+own) and prints one JSON line per run, with the machine it ran on."""
 
 from __future__ import annotations
 
@@ -53,7 +54,7 @@ def main() -> int:
     parser.add_argument("--tile-size", type=float, default=10.0, help="tile side [m] (default 10)")
     parser.add_argument("--window", type=int, default=3, help="tiles on each side of the vehicle (default 3)")
     parser.add_argument("--threads", type=int, help="NDT OpenMP threads, 0 = all cores (default: the localizer's)")
-    parser.add_argument("--trace", type=Path, help="write per-scan CSV traces to DIR/<mode>.csv")
+    parser.add_argument("--trace", type=Path, help="write per-scan CSV traces to DIR/<mode>.csv (cloud, tiles)")
     workspace = Path(os.environ["GPL_WS"])  # exported by tools/env.sh (the Makefile sources it)
     parser.add_argument("--exe", type=Path, default=workspace / "devel/lib/grid_puzzle_localization/bench_localizer")
     args = parser.parse_args()
@@ -62,11 +63,11 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp) / "drive.bin"
         write_input(data, ss.Drive(duration=args.duration), args.imu_rate, seed=1)
-        for mode in ("cloud", "tiles"):
+        for mode in ("cloud", "tiles", "repeat"):
             cmd = [str(args.exe), str(data), mode, "--tile-size", str(args.tile_size), "--window", str(args.window)]
             if args.threads is not None:
                 cmd += ["--threads", str(args.threads)]
-            if args.trace is not None:
+            if args.trace is not None and mode != "repeat":
                 args.trace.mkdir(parents=True, exist_ok=True)
                 cmd += ["--trace", str(args.trace / f"{mode}.csv")]
             out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
