@@ -52,6 +52,35 @@ def test_two_jobs_run_in_two_children(tmp_path):
     assert len(pids) == 2 and str(os.getpid()) not in pids
 
 
+def test_while_waiting_is_called_until_the_children_exit(tmp_path):
+    def job() -> None:  # finishes only after the caller's while_waiting has run once
+        while not (tmp_path / "go").exists():
+            time.sleep(0.001)
+        (tmp_path / "job").write_text("done")
+
+    finished_at_call = []
+
+    def while_waiting() -> None:
+        finished_at_call.append((tmp_path / "job").exists())
+        (tmp_path / "go").touch()
+
+    with in_background([job], fork=True, while_waiting=while_waiting):
+        pass
+    assert finished_at_call[0] is False  # called while the child was still running
+    assert (tmp_path / "job").read_text() == "done"
+
+
+def test_while_waiting_does_not_hide_a_failed_child(tmp_path):
+    def job() -> None:
+        raise RuntimeError("disk full")
+
+    def pause() -> None:
+        time.sleep(0.001)
+
+    with pytest.raises(OSError, match="tile writer process failed"), in_background([job], True, pause):
+        pass
+
+
 def test_map_ahead_keeps_order_and_bounds_the_work_in_flight():
     lock = threading.Lock()
     running, most = 0, 0

@@ -31,7 +31,7 @@ from grid_puzzle_localization.tiling import (
 )
 from grid_puzzle_localization.tiling.buffer import write_all
 from grid_puzzle_localization.tiling.grouping import key_positions, stable_tile_order
-from grid_puzzle_localization.tiling.index import TileEntry, TileIndex, write_index
+from grid_puzzle_localization.tiling.index import TileEntry, TileIndex, TileTable, write_index
 from grid_puzzle_localization.tiling.tiler import MIN_TILES_TO_FORK, _TileHeader
 
 FIELDS = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<u1"), ("t", "<f8"), ("n", "<f4", (2,))])
@@ -329,31 +329,48 @@ def test_failure_mid_write_leaves_nothing_behind(tmp_path, monkeypatch, jobs, ex
 
 
 def test_index_text_is_what_json_would_write(tmp_path):
-    entry = TileEntry(
-        key=(-3, 2_812_345),
-        stem="-5.0_5624691.0",
-        file="-5.0_5624691.0.pcd",
-        center=(-5.0, 5624691.0),
-        points=7,
-        bounds={"min": [-5.999999523162842, 5624690.5, -0.0], "max": [-4.0, 5624691.75, 1e-300]},
-        bytes=250,
-        data_bytes=84,
+    table = TileTable(
+        i=[-3, 4],
+        j=[2_812_345, -1],
+        files=["-5.0_5624691.0.pcd", "9.0_-1.0.pcd"],
+        points=[7, 1],
+        bytes=[250, 180],
+        lower=[[-5.999999523162842, 8.5], [5624690.5, -2.0], [-0.0, 3.0]],
+        upper=[[-4.0, 8.5], [5624691.75, -2.0], [1e-300, 3.0]],
     )
-    index = TileIndex(2.0, [{"name": "x", "size": 4, "type": "F", "count": 1}], 12, 7, 0, [], [entry, entry])
-    expected = {
-        "key": [-3, 2_812_345],
-        "stem": entry.stem,
-        "file": entry.file,
-        "center": [-5.0, 5624691.0],
-        "points": 7,
-        "bounds": entry.bounds,
-        "bytes": 250,
-        "data_bytes": 84,
-    }
-    assert entry.json_text() == json.dumps(expected, separators=(",", ":"))
+    index = TileIndex(2.0, [{"name": "x", "size": 4, "type": "F", "count": 1}], 12, 8, 0, [], table)
+    expected = [
+        {
+            "key": [-3, 2_812_345],
+            "stem": "-5.0_5624691.0",
+            "file": "-5.0_5624691.0.pcd",
+            "center": [-5.0, 5624691.0],
+            "points": 7,
+            "bounds": {"min": [-5.999999523162842, 5624690.5, -0.0], "max": [-4.0, 5624691.75, 1e-300]},
+            "bytes": 250,
+            "data_bytes": 84,
+        },
+        {
+            "key": [4, -1],
+            "stem": "9.0_-1.0",
+            "file": "9.0_-1.0.pcd",
+            "center": [9.0, -1.0],
+            "points": 1,
+            "bounds": {"min": [8.5, -2.0, 3.0], "max": [8.5, -2.0, 3.0]},
+            "bytes": 180,
+            "data_bytes": 12,
+        },
+    ]
+    assert table.json_text(2.0, 12) == json.dumps(expected, separators=(",", ":"))
     write_index(tmp_path, index)
-    assert load_tile_index(tmp_path).tiles == [entry, entry]
-    assert json.loads((tmp_path / "index.json").read_text())["tiles"] == [expected, expected]
+    assert json.loads((tmp_path / "index.json").read_text())["tiles"] == expected
+    loaded = load_tile_index(tmp_path)
+    assert loaded.table == table
+    as_entries = [
+        TileEntry(**{**e, "key": tuple(e["key"]), "center": tuple(e["center"])})  # type: ignore[arg-type]
+        for e in expected
+    ]
+    assert loaded.tiles == as_entries
 
 
 @settings(max_examples=200, deadline=None)
@@ -397,9 +414,10 @@ def test_tile_header_declares_n_points_and_knows_its_size(tmp_path):
     src = tmp_path / "map.pcd"
     write_pcd(src, random_cloud(10, 1.0, seed=13))
     template = _TileHeader.like(read_pcd_header(src))
-    for n in [0, 1, 9, 10, 99, 12_345, 10**12]:
+    counts = [0, 1, 9, 10, 99, 100, 12_345, 10**12, 10**12 - 1]
+    assert template.sizes(np.array(counts)).tolist() == [len(template.of(n)) for n in counts]
+    for n in counts:
         text = template.of(n)
-        assert template.size(n) == len(text)
         parsed = parse_header(text, "tile")
         assert (parsed.points, parsed.width, parsed.height, parsed.data) == (n, n, 1, "binary")
         assert parsed.dtype == FIELDS and parsed.header_bytes == len(text)

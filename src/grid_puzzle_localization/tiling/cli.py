@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         summary = {
             "points": index.points,
-            "tiles": len(index.tiles),
+            "tiles": len(index.table),
             "nonfinite_dropped": index.nonfinite_dropped,
             "spills": result.spills,
             "seconds": result.seconds,
@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(summary))
         return 0
     print(
-        f"{index.points} points in {len(index.tiles)} tiles of {index.grid_size:g} m -> {args.output}"
+        f"{index.points} points in {len(index.table)} tiles of {index.grid_size:g} m -> {args.output}"
         f" ({index.nonfinite_dropped} NaN/inf points dropped, {result.spills} spills, {result.seconds:.2f} s)"
     )
     return 0

@@ -31,6 +31,7 @@ lower-left corner ``[min_x, min_y]`` of its cell.
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 from dataclasses import dataclass, field
@@ -38,6 +39,7 @@ from pathlib import Path
 
 from grid_puzzle_localization.atomic import atomic_write
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.grid import tile_center
 
 INDEX_FILE = "index.json"
 AUTOWARE_METADATA_FILE = "pointcloud_map_metadata.yaml"
@@ -47,6 +49,8 @@ VERSION = 1
 
 @dataclass(frozen=True)
 class TileEntry:
+    """One tile of an index, as a reader of the index sees it."""
+
     key: tuple[int, int]
     stem: str
     file: str
@@ -56,15 +60,55 @@ class TileEntry:
     bytes: int
     data_bytes: int
 
-    def json_text(self) -> str:
-        """The entry as compact JSON, formatted directly: building a dict per tile for json.dumps costs
-        three times as much on 1e5 tiles. Floats are written with repr, as json does; names need no
-        escaping (grid.tile_stem writes digits, '-', '.' and '_' only)."""
-        (i, j), (cx, cy), (x0, y0, z0), (x1, y1, z1) = self.key, self.center, self.bounds["min"], self.bounds["max"]
+
+@dataclass(frozen=True)
+class TileTable:
+    """The tiles of an index as columns, in key order: the tiler fills and formats them for 1e5 tiles
+    without a Python object per tile. Centres, stems and data bytes follow from the other columns."""
+
+    i: list[int]
+    j: list[int]
+    files: list[str]
+    points: list[int]
+    bytes: list[int]  # file size, header included
+    lower: list[list[float]]  # [x, y, z] columns of the tiles' minimum [m]
+    upper: list[list[float]]  # [x, y, z] columns of the tiles' maximum [m]
+
+    def __len__(self) -> int:
+        return len(self.files)
+
+    @classmethod
+    def from_json(cls, tiles: list[dict]) -> TileTable:
+        """From the parsed ``tiles`` array of an index; KeyError/TypeError when an entry is malformed."""
+
+        def column(end: str, axis: int) -> list[float]:
+            return [t["bounds"][end][axis] for t in tiles]
+
+        return cls(
+            i=[t["key"][0] for t in tiles],
+            j=[t["key"][1] for t in tiles],
+            files=[t["file"] for t in tiles],
+            points=[t["points"] for t in tiles],
+            bytes=[t["bytes"] for t in tiles],
+            lower=[column("min", axis) for axis in range(3)],
+            upper=[column("max", axis) for axis in range(3)],
+        )
+
+    def json_text(self, grid_size: float, record_bytes: int) -> str:
+        """The tiles as a compact JSON array, formatted directly (a dict per tile for json.dumps costs
+        three times as much). Floats are written with repr, as json does; names need no escaping
+        (grid.tile_stem writes digits, '-', '.' and '_' only)."""
+        s = grid_size
+        rows = zip(self.i, self.j, self.files, self.points, self.bytes, *self.lower, *self.upper, strict=True)
         return (
-            f'{{"key":[{i},{j}],"stem":"{self.stem}","file":"{self.file}","center":[{cx!r},{cy!r}],'
-            f'"points":{self.points},"bounds":{{"min":[{x0!r},{y0!r},{z0!r}],"max":[{x1!r},{y1!r},{z1!r}]}},'
-            f'"bytes":{self.bytes},"data_bytes":{self.data_bytes}}}'
+            "["
+            + ",".join(
+                f'{{"key":[{i},{j}],"stem":"{f[:-4]}","file":"{f}","center":[{tile_center(i, s)!r},{tile_center(j, s)!r}],'
+                f'"points":{n},"bounds":{{"min":[{x0!r},{y0!r},{z0!r}],"max":[{x1!r},{y1!r},{z1!r}]}},'
+                f'"bytes":{b},"data_bytes":{n * record_bytes}}}'
+                for i, j, f, n, b, x0, y0, z0, x1, y1, z1 in rows
+            )
+            + "]"
         )
 
 
@@ -76,9 +120,29 @@ class TileIndex:
     points: int
     nonfinite_dropped: int
     inputs: list[dict]
-    tiles: list[TileEntry]
+    table: TileTable
     origin: tuple[float, float] = (0.0, 0.0)
     directory: Path = field(default=Path("."), compare=False)
+
+    @functools.cached_property
+    def tiles(self) -> list[TileEntry]:
+        """The tiles as entries, in key order (built on first use)."""
+        t, s = self.table, self.grid_size
+        return [
+            TileEntry(
+                key=(i, j),
+                stem=f[: -len(".pcd")],
+                file=f,
+                center=(tile_center(i, s), tile_center(j, s)),
+                points=n,
+                bounds={"min": [x0, y0, z0], "max": [x1, y1, z1]},
+                bytes=b,
+                data_bytes=n * self.record_bytes,
+            )
+            for i, j, f, n, b, x0, y0, z0, x1, y1, z1 in zip(
+                t.i, t.j, t.files, t.points, t.bytes, *t.lower, *t.upper, strict=True
+            )
+        ]
 
     def path(self, entry: TileEntry) -> Path:
         return self.directory / entry.file
@@ -98,8 +162,8 @@ class TileIndex:
             "nonfinite_dropped": self.nonfinite_dropped,
             "inputs": self.inputs,
         }
-        tiles = ",".join(t.json_text() for t in self.tiles)
-        return f'{json.dumps(head, separators=(",", ":"))[:-1]},"tiles":[{tiles}]}}'
+        tiles = self.table.json_text(self.grid_size, self.record_bytes)
+        return f'{json.dumps(head, separators=(",", ":"))[:-1]},"tiles":{tiles}}}'
 
 
 def write_index(directory: Path, index: TileIndex) -> None:
@@ -108,9 +172,9 @@ def write_index(directory: Path, index: TileIndex) -> None:
 
 
 def write_autoware_metadata(directory: Path, index: TileIndex) -> None:
-    s = index.grid_size
+    s, t = index.grid_size, index.table
     lines = [f"x_resolution: {s!r}", f"y_resolution: {s!r}"]
-    lines += [f'"{t.file}": [{t.key[0] * s!r}, {t.key[1] * s!r}]' for t in index.tiles]
+    lines += [f'"{f}": [{i * s!r}, {j * s!r}]' for f, i, j in zip(t.files, t.i, t.j, strict=True)]
     with atomic_write(directory / AUTOWARE_METADATA_FILE, "wb", fsync=False) as f:
         f.write(("\n".join(lines) + "\n").encode())
 
@@ -128,9 +192,9 @@ def load_tile_index(directory: str | os.PathLike) -> TileIndex:
     if not isinstance(raw, dict) or raw.get("format") != FORMAT or raw.get("version") != VERSION:
         raise UserError(f"{path}: not a version {VERSION} {FORMAT} index; re-run `gpm tile`")
     try:
-        tiles = [TileEntry(**{**t, "key": tuple(t["key"]), "center": tuple(t["center"])}) for t in raw.pop("tiles")]
+        table = TileTable.from_json(raw.pop("tiles"))
         for key in ("format", "version"):
             raw.pop(key)
-        return TileIndex(**{**raw, "origin": tuple(raw["origin"])}, tiles=tiles, directory=directory)
+        return TileIndex(**{**raw, "origin": tuple(raw["origin"])}, table=table, directory=directory)
     except (KeyError, TypeError) as err:
         raise UserError(f"{path}: malformed tile index ({err}); re-run `gpm tile`") from None

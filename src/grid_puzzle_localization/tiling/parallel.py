@@ -39,10 +39,14 @@ def map_ahead(fn: Callable[[T], R], items: Iterable[T], threads: int) -> Iterato
 
 
 @contextlib.contextmanager
-def in_background(jobs: Sequence[Callable[[], None]], fork: bool) -> Iterator[None]:
+def in_background(
+    jobs: Sequence[Callable[[], None]], fork: bool, while_waiting: Callable[[], None] | None = None
+) -> Iterator[None]:
     """Runs each job in its own forked child during the with-block (or, with ``fork`` False, all of
     them right away in this process). Leaving the block waits for every child, even when the block
-    raised, so no child outlives its caller; a failed child raises OSError."""
+    raised, so no child outlives its caller; a failed child raises OSError. ``while_waiting`` is called
+    again and again while the children are still running after the block (the tiler flushes the files
+    they have written so far, so that little is left to flush at the end)."""
     if not (fork and hasattr(os, "fork")):
         for job in jobs:
             job()
@@ -57,10 +61,25 @@ def in_background(jobs: Sequence[Callable[[], None]], fork: bool) -> Iterator[No
             pids.append(pid)
         yield
     finally:
-        codes = [os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) for pid in pids]
+        codes = _wait_for(pids, while_waiting)
     failed = [code for code in codes if code != 0]
     if failed:
         raise OSError(f"a tile writer process failed (exit status {failed[0]}); see the error above")
+
+
+def _wait_for(pids: list[int], while_waiting: Callable[[], None] | None) -> list[int]:
+    """Exit codes of the children ``pids``, calling ``while_waiting`` between polls while any runs."""
+    codes: dict[int, int] = {}
+    while len(codes) < len(pids):
+        for pid in pids:
+            if pid in codes:
+                continue
+            done, status = os.waitpid(pid, os.WNOHANG if while_waiting else 0)
+            if done:
+                codes[pid] = os.waitstatus_to_exitcode(status)
+        if while_waiting is not None and len(codes) < len(pids):
+            while_waiting()
+    return [codes[pid] for pid in pids]
 
 
 def _run_child(job: Callable[[], None]) -> None:

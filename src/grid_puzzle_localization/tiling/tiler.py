@@ -5,8 +5,9 @@ threads while the next is read (parallel.map_ahead) and buffered; when the buffe
 of the memory budget it is spilled to per-tile files (buffer.py). At the end every tile is written
 once as a binary PCD with the input's fields and types (one open, writev and close per tile, by
 ``jobs`` forked writers), while this process writes ``index.json`` and Autoware's
-``pointcloud_map_metadata.yaml`` (index.py). All of it goes into a temporary directory that is
-flushed to disk with one syncfs and then replaces OUT_DIR (atomic.atomic_directory).
+``pointcloud_map_metadata.yaml`` (index.py) and then flushes what the writers have written so far,
+again and again until they finish. All of it goes into a temporary directory that is flushed to disk
+with a last syncfs and then replaces OUT_DIR (atomic.atomic_directory).
 
 Memory: ``memory_mb`` bounds the working set: about 30 % for decoding and sorting the chunks in
 flight, 55 % for buffered points; the rest covers per-tile bookkeeping (about 1 kB per tile, so
@@ -24,19 +25,23 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from grid_puzzle_localization.atomic import atomic_directory, check_output_dir
+import numpy as np
+
+from grid_puzzle_localization.atomic import atomic_directory, check_output_dir, sync_filesystem
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.grid import check_grid_size, tile_center, tile_filename
+from grid_puzzle_localization.grid import check_grid_size, tile_filename
 from grid_puzzle_localization.pcd import PcdChunks, PcdHeader, iter_pcd_chunks, read_pcd_header
 from grid_puzzle_localization.pcd.reader import check_xyz
 from grid_puzzle_localization.tiling.buffer import TileBuffer, TileSet, write_all
 from grid_puzzle_localization.tiling.grouping import group_chunk
-from grid_puzzle_localization.tiling.index import TileEntry, TileIndex, write_autoware_metadata, write_index
+from grid_puzzle_localization.tiling.index import TileIndex, TileTable, write_autoware_metadata, write_index
 from grid_puzzle_localization.tiling.parallel import in_background, map_ahead
 
 MIN_MEMORY_MB = 1.0
 _CHUNK_SHARE = 0.30
 MIN_TILES_TO_FORK = 2000  # below this a fork costs more than it saves
+_FLUSH_PAUSE_S = 0.01  # between flushes while the writers run
+_POWERS_OF_TEN = 10 ** np.arange(19, dtype=np.int64)
 _BUFFER_SHARE = 0.55
 _CHUNK_OVERHEAD_BYTES = 128  # float64/int64 temporaries per point while grouping a chunk
 
@@ -107,7 +112,8 @@ def tile_map(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, co
             functools.partial(_write_tile_files, tiles, names, header, tmp, range(a, b), show and a == 0)
             for a, b in itertools.pairwise(bounds)
         ]
-        with in_background(writer_jobs, fork=fork):
+        flush = functools.partial(_flush_written, tmp) if config.sync else None
+        with in_background(writer_jobs, fork=fork, while_waiting=flush):
             index = _tile_index(s, headers[0], read, tiles, names, header)
             write_index(tmp, index)
             write_autoware_metadata(tmp, index)
@@ -162,9 +168,10 @@ class _TileHeader:
     def of(self, n: int) -> bytes:
         return f"{self.before_width}{n}{self.before_points}{n}{self.after_points}".encode()  # ASCII
 
-    def size(self, n: int) -> int:
-        """len(self.of(n)) without formatting it."""
-        return len(self.before_width) + len(self.before_points) + len(self.after_points) + 2 * len(str(n))
+    def sizes(self, counts: np.ndarray) -> np.ndarray:
+        """len(self.of(n)) for each n in ``counts``, without formatting them."""
+        digits = np.searchsorted(_POWERS_OF_TEN, np.maximum(counts, 1), side="right")
+        return len(self.before_width) + len(self.before_points) + len(self.after_points) + 2 * digits
 
 
 def _write_tile_files(
@@ -196,6 +203,13 @@ def _write_tile_files(
         os.close(dir_fd)
 
 
+def _flush_written(directory: Path) -> None:
+    """Flushes the tiles written so far, then pauses: writeback overlaps the writers (on the other
+    core), and the final syncfs only has the last files to do."""
+    sync_filesystem(directory)
+    time.sleep(_FLUSH_PAUSE_S)
+
+
 def _append_file(fd: int, path: Path) -> None:
     """Copies the file ``path`` to ``fd`` in the kernel, then deletes it."""
     with open(path, "rb") as src:
@@ -216,7 +230,7 @@ def _tile_index(
 ) -> TileIndex:
     record = header.record_bytes
     stats = tiles.stats
-    columns = (stats[name].tolist() for name in ("i", "j", "count", "min", "max"))
+    counts = stats["count"]
     return TileIndex(
         grid_size=s,
         fields=[
@@ -224,7 +238,7 @@ def _tile_index(
             for n, z, t, c in zip(header.fields, header.sizes, header.types, header.counts, strict=True)
         ],
         record_bytes=record,
-        points=int(stats["count"].sum()),
+        points=int(counts.sum()),
         nonfinite_dropped=sum(c.nonfinite_dropped for _, c in read),
         inputs=[
             {
@@ -235,19 +249,15 @@ def _tile_index(
             }
             for p, c in read
         ],
-        tiles=[
-            TileEntry(
-                key=(i, j),
-                stem=name[: -len(".pcd")],
-                file=name,
-                center=(tile_center(i, s), tile_center(j, s)),
-                points=n,
-                bounds={"min": low, "max": high},
-                bytes=tile_header.size(n) + n * record,
-                data_bytes=n * record,
-            )
-            for name, i, j, n, low, high in zip(names, *columns, strict=True)
-        ],
+        table=TileTable(
+            i=stats["i"].tolist(),
+            j=stats["j"].tolist(),
+            files=names,
+            points=counts.tolist(),
+            bytes=(tile_header.sizes(counts) + counts * record).tolist(),
+            lower=stats["min"].T.tolist(),
+            upper=stats["max"].T.tolist(),
+        ),
     )
 
 
