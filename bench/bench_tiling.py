@@ -78,7 +78,6 @@ def main() -> int:
             phases.append(summary)
         index = load_tile_index(out)
         median = statistics.median(seconds)
-        sync = statistics.median(p["seconds_sync"] for p in phases)
         print(
             json.dumps(
                 {
@@ -87,33 +86,29 @@ def main() -> int:
                     "memory_mb": args.memory_mb,
                     "points_in": points_in,
                     "points_out": index.points,
-                    "tiles": len(index.tiles),
+                    "tiles": len(index.table),
                     "seconds": round(median, 3),
                     "points_per_s": round(points_in / median),
                     "peak_rss_mb": round(max(rss), 1),
                     "bytes_in": campus.stat().st_size,
-                    "bytes_tiles_data": sum(t.data_bytes for t in index.tiles),
-                    "bytes_tiles_total": sum(t.bytes for t in index.tiles),
+                    "bytes_tiles_data": sum(index.table.points) * index.record_bytes,
+                    "bytes_tiles_total": sum(index.table.bytes),
                     "repeats": args.repeats,
                     "seconds_all": [round(s, 3) for s in seconds],
                     "seconds_stream_median": round(statistics.median(p["seconds_stream"] for p in phases), 3),
                     "seconds_write_median": round(statistics.median(p["seconds_write"] for p in phases), 3),
-                    "seconds_sync_median": round(sync, 3),
+                    "seconds_sync_median": round(statistics.median(p["seconds_sync"] for p in phases), 3),
                     "stream_points_per_s": round(points_in / statistics.median(p["seconds_stream"] for p in phases)),
-                    "points_per_s_without_sync": round(
-                        points_in
-                        / statistics.median(s - p["seconds_sync"] for s, p in zip(seconds, phases, strict=True))
-                    ),
                     "timing": "seconds: median wall time of the gpm process (Python start-up included);"
-                    " stream: reading + grouping + spilling; write: creating the tile files and index;"
-                    " sync: flushing the tiles to disk (one syncfs) and publishing OUT_DIR",
+                    " stream: reading + grouping + spilling; write: creating the tile files and index, with"
+                    " the files written so far flushed to disk meanwhile; sync: the last syncfs and publishing OUT_DIR",
                     "cpu": cpu_model(),
                     "cores": os.cpu_count(),
                     "threads_used": args.jobs,  # chunks grouped on --jobs threads
                     "processes_used": args.jobs + 1,  # then --jobs forked tile writers beside the index writer
                     "load_avg_1min": [round(load_before, 2), round(os.getloadavg()[0], 2)],  # before, after
                     "output_fs": subprocess.run(
-                        ["stat", "-f", "-c", "%T", tmp], capture_output=True, text=True
+                        ["findmnt", "-n", "-o", "FSTYPE", "-T", tmp], capture_output=True, text=True
                     ).stdout.strip(),
                 }
             )
