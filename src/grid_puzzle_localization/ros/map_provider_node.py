@@ -13,7 +13,6 @@ can recover.
 
 from __future__ import annotations
 
-import math
 import sys
 import threading
 import time
@@ -28,30 +27,12 @@ from grid_puzzle_localization.malloc_tuning import limit_arenas, pin_mmap_thresh
 from grid_puzzle_localization.msg import ProviderStatus, TileDelta
 from grid_puzzle_localization.provider_config import ProviderConfig, load_config
 from grid_puzzle_localization.ros.map_cloud_publisher import MapCloudPublisher
-from grid_puzzle_localization.ros.provider_msgs import provider_status, stamped, tile_delta
+from grid_puzzle_localization.ros.provider_msgs import pose_sample, provider_status, stamped, tile_delta
 from grid_puzzle_localization.tile_directory import open_tile_directory
 from grid_puzzle_localization.tile_store import StoreDelta, TileStore
 from grid_puzzle_localization.window import PoseSample, Window, WindowTracker
 
 WARN_PERIOD = 5.0  # [s] throttle of repeated warnings (off the map, wrong frame)
-
-
-def yaw_of(q) -> float | None:
-    """Yaw [rad] of a geometry_msgs/Quaternion; None when it is all zeros (orientation not set)."""
-    if q.x == q.y == q.z == q.w == 0.0:
-        return None
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-
-
-def pose_sample(pose, stamp: rospy.Time, twist=None) -> PoseSample:
-    """PoseSample of a geometry_msgs/Pose; a body-frame twist becomes a map-frame velocity."""
-    yaw = yaw_of(pose.orientation)
-    velocity = None
-    if twist is not None and yaw is not None:
-        c, s = math.cos(yaw), math.sin(yaw)
-        vx, vy = twist.linear.x, twist.linear.y
-        velocity = (c * vx - s * vy, s * vx + c * vy)
-    return PoseSample(pose.position.x, pose.position.y, stamp.to_sec(), yaw, velocity)
 
 
 class ResetOnSubscribe(rospy.SubscribeListener):

@@ -1,4 +1,5 @@
-"""Messages of grid_puzzle_map_provider built from the pure window and store types."""
+"""Messages of grid_puzzle_map_provider: poses in, converted to the pure window types, and tile deltas and
+status out, built from the pure window and store types."""
 
 from __future__ import annotations
 
@@ -12,9 +13,27 @@ from grid_puzzle_localization.grid import tile_stem
 from grid_puzzle_localization.msg import ProviderStatus, TileDelta
 from grid_puzzle_localization.ros.streamed_msgs import StreamedTileDelta
 from grid_puzzle_localization.tile_store import StoreStats
-from grid_puzzle_localization.window import Window
+from grid_puzzle_localization.window import PoseSample, Window
 
 Key = tuple[int, int]
+
+
+def yaw_of(q) -> float | None:
+    """Yaw [rad] of a geometry_msgs/Quaternion; None when it is all zeros (orientation not set)."""
+    if q.x == q.y == q.z == q.w == 0.0:
+        return None
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def pose_sample(pose, stamp: rospy.Time, twist=None) -> PoseSample:
+    """PoseSample of a geometry_msgs/Pose; a body-frame twist becomes a map-frame velocity."""
+    yaw = yaw_of(pose.orientation)
+    velocity = None
+    if twist is not None and yaw is not None:
+        c, s = math.cos(yaw), math.sin(yaw)
+        vx, vy = twist.linear.x, twist.linear.y
+        velocity = (c * vx - s * vy, s * vx + c * vy)
+    return PoseSample(pose.position.x, pose.position.y, stamp.to_sec(), yaw, velocity)
 
 
 def tile_delta(

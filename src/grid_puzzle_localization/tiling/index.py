@@ -100,16 +100,14 @@ class TileTable:
         (grid.tile_stem writes digits, '-', '.' and '_' only)."""
         s = grid_size
         rows = zip(self.i, self.j, self.files, self.points, self.bytes, *self.lower, *self.upper, strict=True)
-        return (
-            "["
-            + ",".join(
-                f'{{"key":[{i},{j}],"stem":"{f[:-4]}","file":"{f}","center":[{tile_center(i, s)!r},{tile_center(j, s)!r}],'
-                f'"points":{n},"bounds":{{"min":[{x0!r},{y0!r},{z0!r}],"max":[{x1!r},{y1!r},{z1!r}]}},'
-                f'"bytes":{b},"data_bytes":{n * record_bytes}}}'
-                for i, j, f, n, b, x0, y0, z0, x1, y1, z1 in rows
-            )
-            + "]"
+        entries = ",".join(
+            f'{{"key":[{i},{j}],"stem":"{f[:-4]}","file":"{f}",'
+            f'"center":[{tile_center(i, s)!r},{tile_center(j, s)!r}],'
+            f'"points":{n},"bounds":{{"min":[{x0!r},{y0!r},{z0!r}],"max":[{x1!r},{y1!r},{z1!r}]}},'
+            f'"bytes":{b},"data_bytes":{n * record_bytes}}}'
+            for i, j, f, n, b, x0, y0, z0, x1, y1, z1 in rows
         )
+        return f"[{entries}]"
 
 
 @dataclass
