@@ -8,6 +8,7 @@
 #include <optional>
 #include <string>
 
+#include "grid_puzzle_localization/deskew.hpp"
 #include "grid_puzzle_localization/map_update_worker.hpp"
 #include "grid_puzzle_localization/ndt.hpp"
 #include "grid_puzzle_localization/point_cloud.hpp"
@@ -37,6 +38,10 @@ struct LocalizerConfig {
   double min_transformation_probability = 0.0;
   /// ... and, when true, NDT converged (a match that hit max_iterations is rejected).
   bool require_converged = false;
+  /// [s] >= 0: time constant of the low-pass filter on the twist that deskews scans. The twist is the
+  /// difference of two matched poses, and each matched pose depends on the twist its scan was deskewed
+  /// with: unfiltered (0), that loop is marginally stable and the speed oscillates scan to scan.
+  double deskew_twist_smoothing = 0.15;
   bool use_gyro = true;         ///< use gyro samples for the rotation prediction when they cover the interval
   double gyro_max_gap = 0.05;   ///< [s] samples may end this far short of a scan and still cover it
   double time_jump_back = 0.5;  ///< [s] a scan this much older than the last one resets the localizer
@@ -91,14 +96,21 @@ class Localizer {
   void addGyro(double stamp, const Eigen::Vector3d& angular_velocity);
 
   /// Localises one scan taken at `stamp` [s]: `scan` in the sensor frame, `base_T_sensor` the mounting.
-  /// Scan thread only. Never throws for bad data; the output pose is always finite.
-  LocalizerOutput processScan(double stamp, const PointCloud& scan, const Eigen::Isometry3d& base_T_sensor);
+  /// `times` (optional, one per point) are the capture times [s] after `stamp`; with them and
+  /// config.preprocess.deskew the points are moved to the stamp along the predicted motion, so the pose is
+  /// the one at `stamp` exactly. Times of another size than the scan are ignored. Scan thread only. Never
+  /// throws for bad data; the output pose is always finite.
+  LocalizerOutput processScan(double stamp, const PointCloud& scan, const Eigen::Isometry3d& base_T_sensor,
+                              const PointTimes* times = nullptr);
 
   /// Forgets the motion and the pose (the map stays); the default initial pose, if any, is re-armed.
   void reset();
 
  private:
   bool acceptable(const NdtResult& r) const;
+  /// The predicted sensor motion over the sweep [stamp + t_begin, stamp + t_end]; gyro rotation when covered.
+  SweepMotion sweepMotion(double stamp, double t_begin, double t_end, const Eigen::Isometry3d& base_T_sensor,
+                          bool fresh) const;
 
   LocalizerConfig config_;
   Preprocessor preprocessor_;

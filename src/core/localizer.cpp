@@ -1,5 +1,6 @@
 #include "grid_puzzle_localization/localizer.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <sstream>
 #include <stdexcept>
@@ -44,6 +45,8 @@ std::string LocalizerConfig::validate() const {
   if (!(min_nvtl >= 0.0)) err << "min_nvtl must be >= 0 (got " << min_nvtl << "); ";
   if (!(min_transformation_probability >= 0.0))
     err << "min_transformation_probability must be >= 0 (got " << min_transformation_probability << "); ";
+  if (!(deskew_twist_smoothing >= 0.0))
+    err << "deskew_twist_smoothing must be >= 0 s (got " << deskew_twist_smoothing << "); ";
   if (!(gyro_max_gap >= 0.0)) err << "gyro_max_gap must be >= 0 s (got " << gyro_max_gap << "); ";
   if (!(time_jump_back > 0.0)) err << "time_jump_back must be > 0 s (got " << time_jump_back << "); ";
   return err.str();
@@ -93,7 +96,28 @@ bool Localizer::acceptable(const NdtResult& r) const {
   return r.transform.allFinite();
 }
 
-LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, const Eigen::Isometry3d& base_T_sensor) {
+SweepMotion Localizer::sweepMotion(double stamp, double t_begin, double t_end, const Eigen::Isometry3d& base_T_sensor,
+                                   bool fresh) const {
+  // Right after an initial pose there is no motion estimate: the scan is taken as if the sensor stood still.
+  const Twist twist = fresh ? Twist::Zero() : predictor_.smoothedTwist();
+  if (fresh || !config_.use_gyro || !gyro_.covers(stamp + t_begin, stamp + t_end, config_.gyro_max_gap))
+    return SweepMotion::fromTwist(twist, base_T_sensor, t_begin, t_end);
+  auto rotation = [&](double t) {
+    return t >= 0.0 ? gyro_.integrate(stamp, stamp + t) : gyro_.integrate(stamp + t, stamp).inverse();
+  };
+  auto motion = [&](double t) {
+    Eigen::Isometry3d m = expTwist(twist, t);
+    m.linear() = rotation(t).toRotationMatrix();
+    return m;
+  };
+  const double span = t_end - t_begin;
+  const double rate =
+      span > 0.0 ? Eigen::AngleAxisd(rotation(t_begin).inverse() * rotation(t_end)).angle() / span : 0.0;
+  return SweepMotion(motion, base_T_sensor, t_begin, t_end, std::max(rate, twist.tail<3>().norm()));
+}
+
+LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, const Eigen::Isometry3d& base_T_sensor,
+                                       const PointTimes* times) {
   const Clock::time_point start = Clock::now();
   LocalizerOutput out;
   if (last_stamp_ && stamp < *last_stamp_ - config_.time_jump_back) {
@@ -128,7 +152,13 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   }
   out.state = LocalizerState::kTracking;
 
-  preprocessor_.apply(scan, source_, &out.preprocess);
+  if (config_.preprocess.deskew && times && times->size() == scan.size()) {
+    const auto [t_begin, t_end] = timeSpan(*times);
+    const SweepMotion motion = sweepMotion(stamp, t_begin, t_end, base_T_sensor, fresh);
+    preprocessor_.apply(scan, source_, &out.preprocess, times, &motion);
+  } else {
+    preprocessor_.apply(scan, source_, &out.preprocess);
+  }
   const Eigen::Isometry3f base_T_sensor_f = base_T_sensor.cast<float>();
   for (Point& p : source_) p = base_T_sensor_f * p;
 
@@ -156,7 +186,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   if (fresh)
     predictor_.reset(out.pose, stamp);
   else
-    predictor_.update(out.pose, stamp);
+    predictor_.update(out.pose, stamp, config_.deskew_twist_smoothing);
   gyro_.dropBefore(stamp);
   out.twist = predictor_.twist();
   out.covariance = out.match_accepted ? covarianceFromHessian(out.ndt.hessian, config_.covariance)
