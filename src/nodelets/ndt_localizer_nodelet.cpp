@@ -161,6 +161,14 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     if (out.reset) NODELET_WARN("scan time went backwards (bag loop?): localizer reset");
     reportState(out.state);
     if (out.state != LocalizerState::kTracking) return;
+    if (out.lost && out.match_accepted)
+      NODELET_WARN(
+          "re-acquired the map after %d rejected matches (best of %d guesses up to %.1f m around the "
+          "prediction)",
+          params_.core.recovery.after_rejections, out.recovery_candidates, params_.core.recovery.radius);
+    else if (out.lost)
+      NODELET_WARN_THROTTLE(2.0, "lost: matches keep being rejected; searching up to %.1f m around the prediction",
+                            params_.core.recovery.radius);
     if (!out.match_accepted)
       NODELET_WARN_THROTTLE(2.0, "poor match (%s, NVTL %.2f, TP %.2f, %d iterations): publishing the prediction",
                             toString(out.ndt.status), out.ndt.nvtl, out.ndt.transformation_probability,
