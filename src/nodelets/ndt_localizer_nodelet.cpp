@@ -161,11 +161,13 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     if (out.reset) NODELET_WARN("scan time went backwards (bag loop?): localizer reset");
     reportState(out.state);
     if (out.state != LocalizerState::kTracking) return;
-    if (out.lost && out.match_accepted)
+    if (out.lost && out.match_accepted && out.recovery_candidates > 0)
       NODELET_WARN(
-          "re-acquired the map after %d rejected matches (best of %d guesses up to %.1f m around the "
-          "prediction)",
+          "re-acquired the map after %d or more rejected matches (best of %d guesses up to %.1f m around "
+          "the prediction)",
           params_.core.recovery.after_rejections, out.recovery_candidates, params_.core.recovery.radius);
+    else if (out.lost && out.match_accepted)
+      NODELET_WARN("matching again after %d or more rejected matches", params_.core.recovery.after_rejections);
     else if (out.lost)
       NODELET_WARN_THROTTLE(2.0, "lost: matches keep being rejected; searching up to %.1f m around the prediction",
                             params_.core.recovery.radius);
