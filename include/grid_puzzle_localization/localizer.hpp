@@ -7,7 +7,9 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
+#include "grid_puzzle_localization/deskew.hpp"
 #include "grid_puzzle_localization/map_update_worker.hpp"
 #include "grid_puzzle_localization/ndt.hpp"
 #include "grid_puzzle_localization/point_cloud.hpp"
@@ -16,6 +18,19 @@
 #include "grid_puzzle_localization/preprocess.hpp"
 
 namespace grid_puzzle_localization {
+
+/// Re-acquisition after a loss: once `after_rejections` scans in a row had their match rejected, each
+/// further scan is also matched from `candidates_per_scan` guesses on a grid of `step` around the
+/// prediction (map-frame x y offsets up to `radius`, nearest first, cycling over scans); the best
+/// acceptable match (highest NVTL) is taken.
+struct RecoveryConfig {
+  int after_rejections = 3;     ///< >= 0; 0 disables re-acquisition (the localizer coasts on the prediction)
+  double radius = 4.0;          ///< [m] >= 0, largest offset tried
+  double step = 2.0;            ///< [m] > 0, grid spacing of the offsets
+  int candidates_per_scan = 4;  ///< >= 1; each costs one more alignment while lost
+
+  std::string validate() const;
+};
 
 struct LocalizerConfig {
   PreprocessConfig preprocess;  ///< applied in the sensor frame (ranges are from the sensor)
@@ -37,10 +52,15 @@ struct LocalizerConfig {
   double min_transformation_probability = 0.0;
   /// ... and, when true, NDT converged (a match that hit max_iterations is rejected).
   bool require_converged = false;
+  /// [s] >= 0: time constant of the low-pass filter on the twist that deskews scans. The twist is the
+  /// difference of two matched poses, and each matched pose depends on the twist its scan was deskewed
+  /// with: unfiltered (0), that loop is marginally stable and the speed oscillates scan to scan.
+  double deskew_twist_smoothing = 0.15;
   bool use_gyro = true;         ///< use gyro samples for the rotation prediction when they cover the interval
   double gyro_max_gap = 0.05;   ///< [s] samples may end this far short of a scan and still cover it
   double time_jump_back = 0.5;  ///< [s] a scan this much older than the last one resets the localizer
   bool output_aligned = false;  ///< fill LocalizerOutput::aligned (costs a copy per scan)
+  RecoveryConfig recovery;
 
   /// Empty when usable, else every bad value with its allowed range (includes the nested configs).
   std::string validate() const;
@@ -64,6 +84,9 @@ struct LocalizerOutput {
   /// twist is not measured (first scan after an initial pose, or a prediction).
   Matrix6d twist_covariance = Matrix6d::Zero();
   bool match_accepted = false;  ///< false: pose is the prediction
+  /// This scan came after recovery.after_rejections rejected matches in a row: re-acquisition was tried.
+  bool lost = false;
+  int recovery_candidates = 0;  ///< extra alignments tried for re-acquisition on this scan
   NdtResult ndt;                ///< the match (status INVALID_INPUT when no match was tried)
   PreprocessReport preprocess;
   double align_ms = 0.0;  ///< NDT only
@@ -91,14 +114,23 @@ class Localizer {
   void addGyro(double stamp, const Eigen::Vector3d& angular_velocity);
 
   /// Localises one scan taken at `stamp` [s]: `scan` in the sensor frame, `base_T_sensor` the mounting.
-  /// Scan thread only. Never throws for bad data; the output pose is always finite.
-  LocalizerOutput processScan(double stamp, const PointCloud& scan, const Eigen::Isometry3d& base_T_sensor);
+  /// `times` (optional, one per point) are the capture times [s] after `stamp`; with them and
+  /// config.preprocess.deskew the points are moved to the stamp along the predicted motion, so the pose is
+  /// the one at `stamp` exactly. Times of another size than the scan are ignored. Scan thread only. Never
+  /// throws for bad data; the output pose is always finite.
+  LocalizerOutput processScan(double stamp, const PointCloud& scan, const Eigen::Isometry3d& base_T_sensor,
+                              const PointTimes* times = nullptr);
 
   /// Forgets the motion and the pose (the map stays); the default initial pose, if any, is re-armed.
   void reset();
 
  private:
   bool acceptable(const NdtResult& r) const;
+  /// Matches from recovery guesses around `guess`; the best acceptable result, if any.
+  std::optional<NdtResult> reacquire(const Eigen::Isometry3d& guess, LocalizerOutput& out);
+  /// The predicted sensor motion over the sweep [stamp + t_begin, stamp + t_end]; gyro rotation when covered.
+  SweepMotion sweepMotion(double stamp, double t_begin, double t_end, const Eigen::Isometry3d& base_T_sensor,
+                          bool fresh) const;
 
   LocalizerConfig config_;
   Preprocessor preprocessor_;
@@ -111,6 +143,9 @@ class Localizer {
   std::optional<Eigen::Isometry3d> pending_initial_pose_;
   std::optional<Eigen::Isometry3d> default_initial_pose_;
   std::optional<double> last_stamp_;
+  int rejected_in_a_row_ = 0;
+  std::vector<Eigen::Vector3d> recovery_offsets_;  // map frame, nearest first
+  std::size_t next_recovery_offset_ = 0;
 };
 
 }  // namespace grid_puzzle_localization

@@ -60,20 +60,26 @@ class PosePredictor {
   double stamp() const { return stamp_; }
   const Eigen::Isometry3d& pose() const { return pose_; }
   const Twist& twist() const { return twist_; }
+  /// The twist low-pass filtered with time constant `smoothing` [s] (see update); the first twist measured
+  /// after a reset is taken as is. Zero after a reset.
+  const Twist& smoothedTwist() const { return smoothed_twist_; }
 
   /// Pose at `stamp` [s]: the last pose moved by the constant body twist. When `gyro_rotation` is
   /// given it replaces the rotation part of the motion (the translation still follows the twist).
   Eigen::Isometry3d predict(double stamp, const Eigen::Quaterniond* gyro_rotation = nullptr) const;
 
   /// Records the estimated pose at `stamp` [s] and re-estimates the twist from the previous pose.
-  /// A non-positive time step keeps the twist.
-  void update(const Eigen::Isometry3d& pose, double stamp);
+  /// A non-positive time step keeps the twist. `smoothing` [s] >= 0 is the time constant of smoothedTwist
+  /// (0: no smoothing).
+  void update(const Eigen::Isometry3d& pose, double stamp, double smoothing = 0.0);
 
  private:
   bool initialized_ = false;
   double stamp_ = 0.0;
   Eigen::Isometry3d pose_ = Eigen::Isometry3d::Identity();
   Twist twist_ = Twist::Zero();
+  Twist smoothed_twist_ = Twist::Zero();
+  bool twist_measured_ = false;  ///< a twist has been measured since the reset
 };
 
 }  // namespace grid_puzzle_localization

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "grid_puzzle_localization/deskew.hpp"
 #include "grid_puzzle_localization/point_cloud.hpp"
 
 namespace grid_puzzle_localization {
@@ -14,6 +15,9 @@ struct PreprocessConfig {
   double min_range = 1.0;    ///< [m] points closer to the sensor are dropped (robot body, ghost returns)
   double max_range = 100.0;  ///< [m] points farther away are dropped
   double voxel_size = 0.5;   ///< [m] leaf of the centroid voxel filter; 0 disables downsampling
+  /// Move the points of a scan that carries per-point times to the scan stamp (after the range crop, before
+  /// the voxel filter, so the robot body is still cropped and voxels average deskewed points).
+  bool deskew = true;
 
   /// Returns an empty string when the values are usable, otherwise a message naming the bad value.
   std::string validate() const;
@@ -25,6 +29,7 @@ struct PreprocessReport {
   std::size_t at_origin = 0;     ///< dropped: exactly (0, 0, 0), a sensor's "no return"
   std::size_t out_of_range = 0;  ///< dropped by the range crop
   std::size_t output = 0;        ///< points returned
+  bool deskewed = false;         ///< the kept points were moved to the scan stamp
 };
 
 /// Centroid voxel filter: the points of each occupied world-aligned voxel (leaf in metres) are replaced by
@@ -53,11 +58,15 @@ class Preprocessor {
   /// Throws std::invalid_argument when `config` does not validate.
   explicit Preprocessor(const PreprocessConfig& config);
   /// Filters `input` (sensor frame, metres) into `out` (its previous content is replaced; not `input` itself).
-  void apply(const PointCloud& input, PointCloud& out, PreprocessReport* report = nullptr);
+  /// With `times` (one per input point, [s] after the stamp) and `motion`, and config.deskew, the kept points
+  /// are deskewed. Throws std::invalid_argument when `times` has another size than `input`.
+  void apply(const PointCloud& input, PointCloud& out, PreprocessReport* report = nullptr,
+             const PointTimes* times = nullptr, const SweepMotion* motion = nullptr);
 
  private:
   PreprocessConfig config_;
   PointCloud kept_;
+  PointTimes kept_times_;
   VoxelCentroidFilter voxel_filter_;
 };
 

@@ -1,5 +1,6 @@
 #include "grid_puzzle_localization/localizer.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <sstream>
 #include <stdexcept>
@@ -35,15 +36,41 @@ Eigen::Isometry3d toIsometry(const Eigen::Matrix4f& m) {
   return out;
 }
 
+// Grid offsets (x y, map frame) with 0 < |offset| <= radius, nearest first.
+std::vector<Eigen::Vector3d> recoveryOffsets(const RecoveryConfig& c) {
+  std::vector<Eigen::Vector3d> out;
+  const int n = static_cast<int>(std::floor(c.radius / c.step));
+  for (int i = -n; i <= n; ++i)
+    for (int j = -n; j <= n; ++j) {
+      const Eigen::Vector3d o(i * c.step, j * c.step, 0.0);
+      if ((i != 0 || j != 0) && o.norm() <= c.radius + 1e-9) out.push_back(o);
+    }
+  std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.norm() < b.norm(); });
+  return out;
+}
+
 }  // namespace
+
+std::string RecoveryConfig::validate() const {
+  std::ostringstream err;
+  if (!(after_rejections >= 0))
+    err << "recovery/after_rejections must be >= 0, 0 = off (got " << after_rejections << "); ";
+  if (!(radius >= 0.0)) err << "recovery/radius must be >= 0 m (got " << radius << "); ";
+  if (!(step > 0.0)) err << "recovery/step must be > 0 m (got " << step << "); ";
+  if (!(candidates_per_scan >= 1))
+    err << "recovery/candidates_per_scan must be >= 1 (got " << candidates_per_scan << "); ";
+  return err.str();
+}
 
 std::string LocalizerConfig::validate() const {
   std::ostringstream err;
-  err << preprocess.validate() << ndt.validate() << covariance.validate();
+  err << preprocess.validate() << ndt.validate() << covariance.validate() << recovery.validate();
   if (!(map_update_threads >= 0)) err << "map_update_threads must be >= 0 (0 = all cores); ";
   if (!(min_nvtl >= 0.0)) err << "min_nvtl must be >= 0 (got " << min_nvtl << "); ";
   if (!(min_transformation_probability >= 0.0))
     err << "min_transformation_probability must be >= 0 (got " << min_transformation_probability << "); ";
+  if (!(deskew_twist_smoothing >= 0.0))
+    err << "deskew_twist_smoothing must be >= 0 s (got " << deskew_twist_smoothing << "); ";
   if (!(gyro_max_gap >= 0.0)) err << "gyro_max_gap must be >= 0 s (got " << gyro_max_gap << "); ";
   if (!(time_jump_back > 0.0)) err << "time_jump_back must be > 0 s (got " << time_jump_back << "); ";
   return err.str();
@@ -65,7 +92,8 @@ Localizer::Localizer(const LocalizerConfig& config)
     : config_(validated(config)),
       preprocessor_(config.preprocess),
       aligner_(config.ndt),
-      worker_(workerParams(config)) {}
+      worker_(workerParams(config)),
+      recovery_offsets_(recoveryOffsets(config.recovery)) {}
 
 void Localizer::setInitialPose(const Eigen::Isometry3d& map_T_base) { pending_initial_pose_ = map_T_base; }
 
@@ -83,6 +111,20 @@ void Localizer::reset() {
   gyro_.clear();
   pending_initial_pose_ = default_initial_pose_;
   last_stamp_.reset();
+  rejected_in_a_row_ = 0;
+}
+
+std::optional<NdtResult> Localizer::reacquire(const Eigen::Isometry3d& guess, LocalizerOutput& out) {
+  std::optional<NdtResult> best;
+  const int tries = std::min<int>(config_.recovery.candidates_per_scan, static_cast<int>(recovery_offsets_.size()));
+  for (int k = 0; k < tries; ++k) {
+    Eigen::Isometry3d candidate = guess;
+    candidate.translation() += recovery_offsets_[next_recovery_offset_++ % recovery_offsets_.size()];
+    NdtResult r = aligner_.align(*target_, source_, candidate.cast<float>());
+    ++out.recovery_candidates;
+    if (acceptable(r) && (!best || r.nvtl > best->nvtl)) best = std::move(r);
+  }
+  return best;
 }
 
 bool Localizer::acceptable(const NdtResult& r) const {
@@ -93,7 +135,28 @@ bool Localizer::acceptable(const NdtResult& r) const {
   return r.transform.allFinite();
 }
 
-LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, const Eigen::Isometry3d& base_T_sensor) {
+SweepMotion Localizer::sweepMotion(double stamp, double t_begin, double t_end, const Eigen::Isometry3d& base_T_sensor,
+                                   bool fresh) const {
+  // Right after an initial pose there is no motion estimate: the scan is taken as if the sensor stood still.
+  const Twist twist = fresh ? Twist::Zero() : predictor_.smoothedTwist();
+  if (fresh || !config_.use_gyro || !gyro_.covers(stamp + t_begin, stamp + t_end, config_.gyro_max_gap))
+    return SweepMotion::fromTwist(twist, base_T_sensor, t_begin, t_end);
+  auto rotation = [&](double t) {
+    return t >= 0.0 ? gyro_.integrate(stamp, stamp + t) : gyro_.integrate(stamp + t, stamp).inverse();
+  };
+  auto motion = [&](double t) {
+    Eigen::Isometry3d m = expTwist(twist, t);
+    m.linear() = rotation(t).toRotationMatrix();
+    return m;
+  };
+  const double span = t_end - t_begin;
+  const double rate =
+      span > 0.0 ? Eigen::AngleAxisd(rotation(t_begin).inverse() * rotation(t_end)).angle() / span : 0.0;
+  return SweepMotion(motion, base_T_sensor, t_begin, t_end, std::max(rate, twist.tail<3>().norm()));
+}
+
+LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, const Eigen::Isometry3d& base_T_sensor,
+                                       const PointTimes* times) {
   const Clock::time_point start = Clock::now();
   LocalizerOutput out;
   if (last_stamp_ && stamp < *last_stamp_ - config_.time_jump_back) {
@@ -128,7 +191,13 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   }
   out.state = LocalizerState::kTracking;
 
-  preprocessor_.apply(scan, source_, &out.preprocess);
+  if (config_.preprocess.deskew && times && times->size() == scan.size()) {
+    const auto [t_begin, t_end] = timeSpan(*times);
+    const SweepMotion motion = sweepMotion(stamp, t_begin, t_end, base_T_sensor, fresh);
+    preprocessor_.apply(scan, source_, &out.preprocess, times, &motion);
+  } else {
+    preprocessor_.apply(scan, source_, &out.preprocess);
+  }
   const Eigen::Isometry3f base_T_sensor_f = base_T_sensor.cast<float>();
   for (Point& p : source_) p = base_T_sensor_f * p;
 
@@ -143,26 +212,37 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   out.prediction = guess;
   const Clock::time_point align_start = Clock::now();
   out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
-  out.align_ms = msSince(align_start);
-
   out.match_accepted = acceptable(out.ndt);
+  if (fresh) rejected_in_a_row_ = 0;
+  out.lost = config_.recovery.after_rejections > 0 && rejected_in_a_row_ >= config_.recovery.after_rejections;
+  bool reacquired = false;
+  if (!out.match_accepted && out.lost) {
+    if (std::optional<NdtResult> found = reacquire(guess, out)) {
+      out.ndt = std::move(*found);
+      out.match_accepted = reacquired = true;
+    }
+  }
   out.pose = out.match_accepted ? toIsometry(out.ndt.transform) : guess;
+  out.align_ms = msSince(align_start);  // with the re-acquisition attempts
   if (!out.pose.matrix().allFinite()) {
     out.pose = guess;
     out.match_accepted = false;
   }
+  rejected_in_a_row_ = out.match_accepted ? 0 : rejected_in_a_row_ + 1;
   const double dt = stamp - predictor_.stamp();
-  // After a new initial pose the first match may move far from it: that jump is a correction, not motion.
-  if (fresh)
+  // After a new initial pose or a re-acquisition the match may move far from the guess: that jump is a
+  // correction, not motion.
+  if (fresh || reacquired)
     predictor_.reset(out.pose, stamp);
   else
-    predictor_.update(out.pose, stamp);
+    predictor_.update(out.pose, stamp, config_.deskew_twist_smoothing);
   gyro_.dropBefore(stamp);
   out.twist = predictor_.twist();
   out.covariance = out.match_accepted ? covarianceFromHessian(out.ndt.hessian, config_.covariance)
                                       : predictionCovariance(config_.covariance);
-  out.twist_covariance = out.match_accepted && !fresh && dt > 0.0 ? out.covariance * (2.0 / (dt * dt))
-                                                                  : predictionCovariance(config_.covariance);
+  out.twist_covariance = out.match_accepted && !fresh && !reacquired && dt > 0.0
+                             ? out.covariance * (2.0 / (dt * dt))
+                             : predictionCovariance(config_.covariance);
   if (config_.output_aligned) {
     const Eigen::Isometry3f map_T_base = out.pose.cast<float>();
     out.aligned.reserve(source_.size());

@@ -105,6 +105,8 @@ void PosePredictor::reset(const Eigen::Isometry3d& pose, double stamp) {
   stamp_ = stamp;
   pose_ = pose;
   twist_.setZero();
+  smoothed_twist_.setZero();
+  twist_measured_ = false;
 }
 
 Eigen::Isometry3d PosePredictor::predict(double stamp, const Eigen::Quaterniond* gyro_rotation) const {
@@ -116,9 +118,14 @@ Eigen::Isometry3d PosePredictor::predict(double stamp, const Eigen::Quaterniond*
   return out;
 }
 
-void PosePredictor::update(const Eigen::Isometry3d& pose, double stamp) {
+void PosePredictor::update(const Eigen::Isometry3d& pose, double stamp, double smoothing) {
   const double dt = stamp - stamp_;
-  if (dt > 0.0) twist_ = logTwist(pose_.inverse() * pose) / dt;
+  if (dt > 0.0) {
+    twist_ = logTwist(pose_.inverse() * pose) / dt;
+    const double keep = twist_measured_ && smoothing > 0.0 ? std::exp(-dt / smoothing) : 0.0;
+    smoothed_twist_ = keep * smoothed_twist_ + (1.0 - keep) * twist_;
+    twist_measured_ = true;
+  }
   pose_ = pose;
   stamp_ = stamp;
 }

@@ -60,14 +60,21 @@ Preprocessor::Preprocessor(const PreprocessConfig& config) : config_(config) {
   if (!problem.empty()) throw std::invalid_argument("preprocess: " + problem);
 }
 
-void Preprocessor::apply(const PointCloud& input, PointCloud& out, PreprocessReport* report) {
+void Preprocessor::apply(const PointCloud& input, PointCloud& out, PreprocessReport* report, const PointTimes* times,
+                         const SweepMotion* motion) {
   PreprocessReport r;
   r.input = input.size();
+  const bool deskew = config_.deskew && times && motion;
+  if (deskew && times->size() != input.size())
+    throw std::invalid_argument("preprocess: " + std::to_string(times->size()) + " point times for " +
+                                std::to_string(input.size()) + " points");
   PointCloud& kept = config_.voxel_size > 0.0 ? kept_ : out;
   kept.clear();
+  kept_times_.clear();
   const double min2 = config_.min_range * config_.min_range;
   const double max2 = config_.max_range * config_.max_range;
-  for (const Point& p : input) {
+  for (std::size_t i = 0; i < input.size(); ++i) {
+    const Point& p = input[i];
     if (!p.allFinite()) {
       ++r.non_finite;
       continue;
@@ -82,7 +89,10 @@ void Preprocessor::apply(const PointCloud& input, PointCloud& out, PreprocessRep
       continue;
     }
     kept.push_back(p);
+    if (deskew) kept_times_.push_back((*times)[i]);
   }
+  if (deskew) motion->apply(kept, kept_times_);
+  r.deskewed = deskew;
   if (config_.voxel_size > 0.0) voxel_filter_.apply(kept_, config_.voxel_size, out);
   r.output = out.size();
   if (report) *report = r;

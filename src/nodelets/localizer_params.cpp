@@ -54,6 +54,13 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
   load("preprocess/max_range", c.preprocess.max_range);
   load("preprocess/min_range", c.preprocess.min_range);
   load("preprocess/voxel_size", c.preprocess.voxel_size);
+  load("preprocess/deskew", c.preprocess.deskew);
+  load("preprocess/deskew_twist_smoothing", c.deskew_twist_smoothing);
+  load("recovery/after_rejections", c.recovery.after_rejections);
+  load("recovery/radius", c.recovery.radius);
+  load("recovery/step", c.recovery.step);
+  load("recovery/candidates_per_scan", c.recovery.candidates_per_scan);
+  pnh.param("preprocess/time_field", p.time_field, p.time_field);
   load("ndt/resolution", c.ndt.resolution);
   load("ndt/min_points_per_voxel", c.ndt.min_points_per_voxel);
   load("ndt/eigenvalue_ratio", c.ndt.eigenvalue_ratio);

@@ -143,16 +143,34 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     const std::optional<Eigen::Isometry3d> base_T_sensor = staticTransform(msg->header.frame_id);
     if (!base_T_sensor) return;
     PointCloud scan;
+    std::optional<PointTimes> times;
     try {
       scan = fromMsg(*msg);
+      if (params_.core.preprocess.deskew) times = timesFromMsg(*msg, params_.time_field);
     } catch (const std::invalid_argument& e) {
       NODELET_ERROR_THROTTLE(5.0, "points (frame '%s'): %s", msg->header.frame_id.c_str(), e.what());
       return;
     }
-    const LocalizerOutput out = localizer_->processScan(msg->header.stamp.toSec(), scan, *base_T_sensor);
+    if (params_.core.preprocess.deskew && !times)
+      NODELET_WARN_ONCE(
+          "points have no per-point time field '%s': scans are not deskewed (set "
+          "~preprocess/time_field, or ~preprocess/deskew false to silence this)",
+          params_.time_field.c_str());
+    const LocalizerOutput out =
+        localizer_->processScan(msg->header.stamp.toSec(), scan, *base_T_sensor, times ? &*times : nullptr);
     if (out.reset) NODELET_WARN("scan time went backwards (bag loop?): localizer reset");
     reportState(out.state);
     if (out.state != LocalizerState::kTracking) return;
+    if (out.lost && out.match_accepted && out.recovery_candidates > 0)
+      NODELET_WARN(
+          "re-acquired the map after %d or more rejected matches (best of %d guesses up to %.1f m around "
+          "the prediction)",
+          params_.core.recovery.after_rejections, out.recovery_candidates, params_.core.recovery.radius);
+    else if (out.lost && out.match_accepted)
+      NODELET_WARN("matching again after %d or more rejected matches", params_.core.recovery.after_rejections);
+    else if (out.lost)
+      NODELET_WARN_THROTTLE(2.0, "lost: matches keep being rejected; searching up to %.1f m around the prediction",
+                            params_.core.recovery.radius);
     if (!out.match_accepted)
       NODELET_WARN_THROTTLE(2.0, "poor match (%s, NVTL %.2f, TP %.2f, %d iterations): publishing the prediction",
                             toString(out.ndt.status), out.ndt.nvtl, out.ndt.transformation_probability,

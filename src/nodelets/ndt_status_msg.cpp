@@ -19,6 +19,8 @@ NdtStatus toStatusMsg(const LocalizerOutput& out, const std_msgs::Header& header
   msg.target_points = out.target_points;
   msg.source_points = static_cast<std::uint32_t>(out.ndt.source_points);
   msg.map_source = map_source;
+  msg.lost = out.lost;
+  msg.recovery_candidates = static_cast<std::uint32_t>(out.recovery_candidates);
   return msg;
 }
 

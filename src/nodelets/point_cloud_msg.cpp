@@ -18,9 +18,30 @@ double readScalar(const std::uint8_t* src, std::uint8_t datatype) {
     std::memcpy(&v, src, sizeof v);
     return v;
   }
+  if (datatype == sensor_msgs::PointField::UINT32) {
+    std::uint32_t v;
+    std::memcpy(&v, src, sizeof v);
+    return v;
+  }
   double v;
   std::memcpy(&v, src, sizeof v);
   return v;
+}
+
+void checkLayout(const sensor_msgs::PointCloud2& msg) {
+  if (msg.is_bigendian) throw std::invalid_argument("big-endian PointCloud2 is not supported");
+  if (msg.row_step < static_cast<std::size_t>(msg.width) * msg.point_step ||
+      msg.data.size() < static_cast<std::size_t>(msg.row_step) * msg.height)
+    throw std::invalid_argument("PointCloud2 data is shorter than width * height * point_step");
+}
+
+// Calls visit(pointer to the point's first byte) for every point, row by row.
+template <class Visit>
+void forEachPoint(const sensor_msgs::PointCloud2& msg, Visit&& visit) {
+  for (std::uint32_t row = 0; row < msg.height; ++row) {
+    const std::uint8_t* base = msg.data.data() + static_cast<std::size_t>(row) * msg.row_step;
+    for (std::uint32_t col = 0; col < msg.width; ++col) visit(base + static_cast<std::size_t>(col) * msg.point_step);
+  }
 }
 
 }  // namespace
@@ -32,23 +53,33 @@ PointCloud fromMsg(const sensor_msgs::PointCloud2& msg) {
     if (f->datatype != sensor_msgs::PointField::FLOAT32 && f->datatype != sensor_msgs::PointField::FLOAT64)
       throw std::invalid_argument("PointCloud2 field '" + f->name + "' must be FLOAT32 or FLOAT64");
   }
-  if (msg.is_bigendian) throw std::invalid_argument("big-endian PointCloud2 is not supported");
-  const std::size_t n = static_cast<std::size_t>(msg.width) * msg.height;
-  if (msg.row_step < static_cast<std::size_t>(msg.width) * msg.point_step ||
-      msg.data.size() < static_cast<std::size_t>(msg.row_step) * msg.height)
-    throw std::invalid_argument("PointCloud2 data is shorter than width * height * point_step");
+  checkLayout(msg);
   PointCloud cloud;
-  cloud.reserve(n);
-  for (std::uint32_t row = 0; row < msg.height; ++row) {
-    const std::uint8_t* base = msg.data.data() + static_cast<std::size_t>(row) * msg.row_step;
-    for (std::uint32_t col = 0; col < msg.width; ++col) {
-      const std::uint8_t* p = base + static_cast<std::size_t>(col) * msg.point_step;
-      cloud.emplace_back(static_cast<float>(readScalar(p + fields[0]->offset, fields[0]->datatype)),
-                         static_cast<float>(readScalar(p + fields[1]->offset, fields[1]->datatype)),
-                         static_cast<float>(readScalar(p + fields[2]->offset, fields[2]->datatype)));
-    }
-  }
+  cloud.reserve(static_cast<std::size_t>(msg.width) * msg.height);
+  forEachPoint(msg, [&](const std::uint8_t* p) {
+    cloud.emplace_back(static_cast<float>(readScalar(p + fields[0]->offset, fields[0]->datatype)),
+                       static_cast<float>(readScalar(p + fields[1]->offset, fields[1]->datatype)),
+                       static_cast<float>(readScalar(p + fields[2]->offset, fields[2]->datatype)));
+  });
   return cloud;
+}
+
+std::optional<PointTimes> timesFromMsg(const sensor_msgs::PointCloud2& msg, const std::string& name) {
+  const sensor_msgs::PointField* f = findField(msg, name);
+  if (!f) return std::nullopt;
+  double scale = 1.0;
+  if (f->datatype == sensor_msgs::PointField::UINT32)
+    scale = 1e-9;  // Ouster: nanoseconds after the stamp
+  else if (f->datatype != sensor_msgs::PointField::FLOAT32 && f->datatype != sensor_msgs::PointField::FLOAT64)
+    throw std::invalid_argument("PointCloud2 time field '" + name +
+                                "' must be FLOAT32/FLOAT64 seconds or UINT32 nanoseconds after header.stamp");
+  checkLayout(msg);
+  PointTimes times;
+  times.reserve(static_cast<std::size_t>(msg.width) * msg.height);
+  forEachPoint(msg, [&](const std::uint8_t* p) {
+    times.push_back(static_cast<float>(scale * readScalar(p + f->offset, f->datatype)));
+  });
+  return times;
 }
 
 sensor_msgs::PointCloud2 toMsg(const PointCloud& cloud, const std_msgs::Header& header) {

@@ -106,3 +106,24 @@ TEST(PosePrediction, GyroDropBeforeKeepsTheAnchorAndOlderSampleRestarts) {
   gyro.add(0.05, Eigen::Vector3d::Zero());  // bag loop
   EXPECT_EQ(gyro.size(), 1u);
 }
+
+TEST(PosePrediction, SmoothedTwistTakesTheFirstMeasurementThenLowPassesSteps) {
+  // Straight line along x: 5 m/s for the first step, then 7 m/s. With time constant tau the smoothed speed
+  // after n steps of dt at the new speed is 7 - 2 exp(-n dt / tau) (a first-order low-pass of a step).
+  const double dt = 0.1;
+  const double tau = 0.15;
+  gpl::PosePredictor pred;
+  pred.reset(Eigen::Isometry3d::Identity(), 0.0);
+  EXPECT_EQ(pred.smoothedTwist(), gpl::Twist::Zero());
+  double x = 5.0 * dt;
+  pred.update(Eigen::Isometry3d(Eigen::Translation3d(x, 0, 0)), dt, tau);
+  EXPECT_NEAR(pred.smoothedTwist()(0), 5.0, 1e-12);  // no history: taken as is
+  for (int n = 1; n <= 5; ++n) {
+    x += 7.0 * dt;
+    pred.update(Eigen::Isometry3d(Eigen::Translation3d(x, 0, 0)), dt * (n + 1), tau);
+    EXPECT_NEAR(pred.twist()(0), 7.0, 1e-9);
+    EXPECT_NEAR(pred.smoothedTwist()(0), 7.0 - 2.0 * std::exp(-n * dt / tau), 1e-9) << "step " << n;
+  }
+  pred.reset(Eigen::Isometry3d::Identity(), 1.0);
+  EXPECT_EQ(pred.smoothedTwist(), gpl::Twist::Zero());
+}
