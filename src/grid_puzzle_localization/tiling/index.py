@@ -34,6 +34,7 @@ from __future__ import annotations
 import functools
 import json
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -94,18 +95,38 @@ class TileTable:
             upper=[column("max", axis) for axis in range(3)],
         )
 
+    def rows(self, grid_size: float, record_bytes: int) -> Iterator[tuple]:
+        """Per tile, in key order: i, j, stem, file, cx, cy, points, min x y z, max x y z, bytes and
+        data bytes; the derived columns (stem, centre, data bytes) are computed here only."""
+        columns = zip(self.i, self.j, self.files, self.points, self.bytes, *self.lower, *self.upper, strict=True)
+        for i, j, f, n, b, x0, y0, z0, x1, y1, z1 in columns:
+            yield (
+                i,
+                j,
+                f[: -len(".pcd")],
+                f,
+                tile_center(i, grid_size),
+                tile_center(j, grid_size),
+                n,
+                x0,
+                y0,
+                z0,
+                x1,
+                y1,
+                z1,
+                b,
+                n * record_bytes,
+            )
+
     def json_text(self, grid_size: float, record_bytes: int) -> str:
         """The tiles as a compact JSON array, formatted directly (a dict per tile for json.dumps costs
         three times as much). Floats are written with repr, as json does; names need no escaping
         (grid.tile_stem writes digits, '-', '.' and '_' only)."""
-        s = grid_size
-        rows = zip(self.i, self.j, self.files, self.points, self.bytes, *self.lower, *self.upper, strict=True)
         entries = ",".join(
-            f'{{"key":[{i},{j}],"stem":"{f[:-4]}","file":"{f}",'
-            f'"center":[{tile_center(i, s)!r},{tile_center(j, s)!r}],'
-            f'"points":{n},"bounds":{{"min":[{x0!r},{y0!r},{z0!r}],"max":[{x1!r},{y1!r},{z1!r}]}},'
-            f'"bytes":{b},"data_bytes":{n * record_bytes}}}'
-            for i, j, f, n, b, x0, y0, z0, x1, y1, z1 in rows
+            f'{{"key":[{i},{j}],"stem":"{stem}","file":"{f}","center":[{cx!r},{cy!r}],"points":{n},'
+            f'"bounds":{{"min":[{x0!r},{y0!r},{z0!r}],"max":[{x1!r},{y1!r},{z1!r}]}},'
+            f'"bytes":{b},"data_bytes":{data}}}'
+            for i, j, stem, f, cx, cy, n, x0, y0, z0, x1, y1, z1, b, data in self.rows(grid_size, record_bytes)
         )
         return f"[{entries}]"
 
@@ -125,20 +146,19 @@ class TileIndex:
     @functools.cached_property
     def tiles(self) -> list[TileEntry]:
         """The tiles as entries, in key order (built on first use)."""
-        t, s = self.table, self.grid_size
         return [
             TileEntry(
                 key=(i, j),
-                stem=f[: -len(".pcd")],
+                stem=stem,
                 file=f,
-                center=(tile_center(i, s), tile_center(j, s)),
+                center=(cx, cy),
                 points=n,
                 bounds={"min": [x0, y0, z0], "max": [x1, y1, z1]},
                 bytes=b,
-                data_bytes=n * self.record_bytes,
+                data_bytes=data,
             )
-            for i, j, f, n, b, x0, y0, z0, x1, y1, z1 in zip(
-                t.i, t.j, t.files, t.points, t.bytes, *t.lower, *t.upper, strict=True
+            for i, j, stem, f, cx, cy, n, x0, y0, z0, x1, y1, z1, b, data in self.table.rows(
+                self.grid_size, self.record_bytes
             )
         ]
 

@@ -39,11 +39,11 @@ from grid_puzzle_localization.tiling.parallel import in_background, map_ahead
 
 MIN_MEMORY_MB = 1.0
 _CHUNK_SHARE = 0.30
+_BUFFER_SHARE = 0.55
+_CHUNK_OVERHEAD_BYTES = 128  # float64/int64 temporaries per point while grouping a chunk
 MIN_TILES_TO_FORK = 2000  # below this a fork costs more than it saves
 _FLUSH_PAUSE_S = 0.01  # between flushes while the writers run
 _POWERS_OF_TEN = 10 ** np.arange(19, dtype=np.int64)
-_BUFFER_SHARE = 0.55
-_CHUNK_OVERHEAD_BYTES = 128  # float64/int64 temporaries per point while grouping a chunk
 
 
 @dataclass
@@ -53,7 +53,7 @@ class TileConfig:
     force: bool = False  # replace a non-empty OUT_DIR
     progress: bool = True  # progress bars (only ever shown on a terminal)
     jobs: int = 2  # grouping threads and tile-writing processes (file creation is system-call bound)
-    sync: bool = True  # flush the tiles to disk (one syncfs) before publishing OUT_DIR
+    sync: bool = True  # flush the tiles to disk (while writing, and once more) before publishing OUT_DIR
 
 
 @dataclass
