@@ -4,6 +4,7 @@
 
 #include <Eigen/Geometry>
 #include <functional>
+#include <utility>
 #include <vector>
 
 #include "grid_puzzle_localization/point_cloud.hpp"

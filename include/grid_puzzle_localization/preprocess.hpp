@@ -8,6 +8,7 @@
 
 #include "grid_puzzle_localization/deskew.hpp"
 #include "grid_puzzle_localization/point_cloud.hpp"
+#include "grid_puzzle_localization/voxel_map.hpp"
 
 namespace grid_puzzle_localization {
 
@@ -43,8 +44,8 @@ class VoxelCentroidFilter {
 
  private:
   struct Slot {
-    std::int32_t x, y, z;
-    std::int32_t voxel;  ///< index into sums_/counts_, -1 = empty
+    VoxelKey key;
+    std::int32_t voxel = -1;  ///< index into sums_/counts_, -1 = empty
   };
   std::vector<Slot> slots_;  ///< open addressing, power-of-two size, load <= 0.5; all empty between calls
   std::vector<std::size_t> used_slots_;

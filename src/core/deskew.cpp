@@ -30,7 +30,7 @@ SweepMotion SweepMotion::fromTwist(const Twist& twist, const Eigen::Isometry3d& 
 
 Eigen::Isometry3f SweepMotion::at(double t) const {
   Eigen::Isometry3f out = Eigen::Isometry3f::Identity();
-  if (nodes_.size() == 1 || step_ <= 0.0) {
+  if (step_ <= 0.0) {  // a single node
     out.matrix().topRows<3>() = nodes_.front();
     return out;
   }

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <sstream>
 #include <stdexcept>
 #include <utility>
@@ -70,7 +71,7 @@ std::string LocalizerConfig::validate() const {
   if (!(min_transformation_probability >= 0.0))
     err << "min_transformation_probability must be >= 0 (got " << min_transformation_probability << "); ";
   if (!(deskew_twist_smoothing >= 0.0))
-    err << "deskew_twist_smoothing must be >= 0 s (got " << deskew_twist_smoothing << "); ";
+    err << "preprocess/deskew_twist_smoothing must be >= 0 s (got " << deskew_twist_smoothing << "); ";
   if (!(gyro_max_gap >= 0.0)) err << "gyro_max_gap must be >= 0 s (got " << gyro_max_gap << "); ";
   if (!(time_jump_back > 0.0)) err << "time_jump_back must be > 0 s (got " << time_jump_back << "); ";
   return err.str();
@@ -183,6 +184,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   if (fresh) {
     predictor_.reset(*pending_initial_pose_, stamp);
     pending_initial_pose_.reset();
+    rejected_in_a_row_ = 0;
   }
   if (!predictor_.initialized()) {
     out.state = LocalizerState::kWaitingForInitialPose;
@@ -213,7 +215,6 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   const Clock::time_point align_start = Clock::now();
   out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
   out.match_accepted = acceptable(out.ndt);
-  if (fresh) rejected_in_a_row_ = 0;
   out.lost = config_.recovery.after_rejections > 0 && rejected_in_a_row_ >= config_.recovery.after_rejections;
   bool reacquired = false;
   if (!out.match_accepted && out.lost) {

@@ -5,17 +5,6 @@
 #include <stdexcept>
 
 namespace grid_puzzle_localization {
-namespace {
-
-std::size_t hashKey(std::int32_t x, std::int32_t y, std::int32_t z) {
-  // Large odd multipliers spread neighbouring keys; the final xor-shift brings high bits into the mask.
-  std::uint64_t h = static_cast<std::uint64_t>(static_cast<std::uint32_t>(x)) * 0x9E3779B97F4A7C15ULL ^
-                    static_cast<std::uint64_t>(static_cast<std::uint32_t>(y)) * 0xC2B2AE3D27D4EB4FULL ^
-                    static_cast<std::uint64_t>(static_cast<std::uint32_t>(z)) * 0x165667B19E3779F9ULL;
-  return static_cast<std::size_t>(h ^ (h >> 29));
-}
-
-}  // namespace
 
 std::string PreprocessConfig::validate() const {
   std::ostringstream err;
@@ -29,20 +18,21 @@ void VoxelCentroidFilter::apply(const PointCloud& input, double leaf, PointCloud
   if (!(leaf > 0.0)) throw std::invalid_argument("voxel filter: leaf must be > 0 m");
   std::size_t capacity = 16;
   while (capacity < 2 * input.size()) capacity *= 2;
-  if (slots_.size() < capacity) slots_.assign(capacity, Slot{0, 0, 0, -1});
+  if (slots_.size() < capacity) slots_.assign(capacity, Slot{});
   const std::size_t mask = slots_.size() - 1;
   const double inv = 1.0 / leaf;
   sums_.clear();
   counts_.clear();
   used_slots_.clear();
   for (const Point& p : input) {
-    const auto x = static_cast<std::int32_t>(std::floor(p.x() * inv));
-    const auto y = static_cast<std::int32_t>(std::floor(p.y() * inv));
-    const auto z = static_cast<std::int32_t>(std::floor(p.z() * inv));
-    std::size_t s = hashKey(x, y, z) & mask;
-    while (slots_[s].voxel >= 0 && !(slots_[s].x == x && slots_[s].y == y && slots_[s].z == z)) s = (s + 1) & mask;
+    // The key in double, as before: VoxelMap::keyOf multiplies in float and could pick a neighbouring voxel.
+    const VoxelKey key{static_cast<std::int32_t>(std::floor(p.x() * inv)),
+                       static_cast<std::int32_t>(std::floor(p.y() * inv)),
+                       static_cast<std::int32_t>(std::floor(p.z() * inv))};
+    std::size_t s = static_cast<std::size_t>(VoxelMap::hash(key)) & mask;
+    while (slots_[s].voxel >= 0 && !(slots_[s].key == key)) s = (s + 1) & mask;
     if (slots_[s].voxel < 0) {
-      slots_[s] = {x, y, z, static_cast<std::int32_t>(sums_.size())};
+      slots_[s] = {key, static_cast<std::int32_t>(sums_.size())};
       used_slots_.push_back(s);
       sums_.push_back(Eigen::Vector3d::Zero());
       counts_.push_back(0);
@@ -93,7 +83,7 @@ void Preprocessor::apply(const PointCloud& input, PointCloud& out, PreprocessRep
   }
   if (deskew) motion->apply(kept, kept_times_);
   r.deskewed = deskew;
-  if (config_.voxel_size > 0.0) voxel_filter_.apply(kept_, config_.voxel_size, out);
+  if (config_.voxel_size > 0.0) voxel_filter_.apply(kept, config_.voxel_size, out);
   r.output = out.size();
   if (report) *report = r;
 }

@@ -13,7 +13,7 @@ import numpy as np
 
 from grid_puzzle_localization.errors import PcdError
 from grid_puzzle_localization.pcd.header import parse_header
-from grid_puzzle_localization.pcd.reader import XYZ, check_binary_size, check_xyz, read_pcd
+from grid_puzzle_localization.pcd.reader import XYZ, check_binary_size, check_xyz, finite_xyz, read_pcd
 
 XYZ_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
 
@@ -31,7 +31,7 @@ def read_tile(path: str | os.PathLike, xyz_only: bool = True) -> np.ndarray:
     if header.data == "binary":
         check_binary_size(header, len(raw) - header.header_bytes, path)
         records = np.frombuffer(raw, dtype=header.dtype, count=header.points, offset=header.header_bytes)
-        finite = np.isfinite(records["x"]) & np.isfinite(records["y"]) & np.isfinite(records["z"])
+        finite = finite_xyz(records)
         if not finite.all():
             records = records[finite]
     else:

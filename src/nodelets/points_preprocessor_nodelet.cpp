@@ -4,6 +4,7 @@
 #include <ros/ros.h>
 #include <sensor_msgs/PointCloud2.h>
 
+#include <optional>
 #include <pluginlib/class_list_macros.hpp>
 
 #include "grid_puzzle_localization/preprocess.hpp"
@@ -24,19 +25,23 @@ class PointsPreprocessorNodelet : public nodelet::Nodelet {
       NODELET_FATAL("%s: bad parameters: %s fix them in the launch file or YAML", getName().c_str(), problem.c_str());
       throw std::invalid_argument(problem);
     }
+    preprocessor_.emplace(config_);
     pub_ = nh.advertise<sensor_msgs::PointCloud2>("points_filtered", 5);
     sub_ = nh.subscribe("points", 5, &PointsPreprocessorNodelet::onPoints, this);
   }
 
   void onPoints(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     try {
-      pub_.publish(toMsg(preprocess(fromMsg(*msg), config_), msg->header));
+      preprocessor_->apply(fromMsg(*msg), filtered_);
+      pub_.publish(toMsg(filtered_, msg->header));
     } catch (const std::invalid_argument& e) {
       NODELET_ERROR_THROTTLE(5.0, "points (frame '%s'): %s", msg->header.frame_id.c_str(), e.what());
     }
   }
 
   PreprocessConfig config_;
+  std::optional<Preprocessor> preprocessor_;  ///< built once the parameters are valid; reuses its buffers
+  PointCloud filtered_;
   ros::Publisher pub_;
   ros::Subscriber sub_;
 };

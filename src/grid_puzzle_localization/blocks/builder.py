@@ -124,11 +124,11 @@ class _Candidate:
 
 class BlockBuilder:
     """Feeds keyframes one at a time (:meth:`add_keyframe`), then :meth:`finish` returns the blocks.
-    ``sets`` defaults to :class:`VoxelClouds` with the config's voxel and ``extrinsic``."""
+    ``sets`` defaults to :class:`VoxelClouds` with the config's voxel."""
 
-    def __init__(self, config: BlockConfig, extrinsic: np.ndarray | None = None, sets: PointSets | None = None) -> None:
+    def __init__(self, config: BlockConfig, sets: PointSets | None = None) -> None:
         self.config = config.checked()
-        self.sets: PointSets = sets if sets is not None else VoxelClouds(config.voxel, extrinsic)
+        self.sets: PointSets = sets if sets is not None else VoxelClouds(config.voxel)
         self.blocks: list[Block] = []
         self.report = BuildReport()
         self._candidate: _Candidate | None = None
@@ -176,12 +176,10 @@ class BlockBuilder:
             target.keyframes += candidate.keyframes
 
 
-def build_blocks(
-    scans: Iterable[Scan], config: BlockConfig, extrinsic: np.ndarray | None = None, sets: PointSets | None = None
-) -> BlockBuilder:
+def build_blocks(scans: Iterable[Scan], config: BlockConfig, sets: PointSets | None = None) -> BlockBuilder:
     """The finished builder (``.blocks``, ``.report``, ``.map_points()``) of ``scans`` in time order:
     keyframes are selected by ``config.keyframe_spacing``."""
-    builder = BlockBuilder(config, extrinsic, sets)
+    builder = BlockBuilder(config, sets)
     for scan in select_keyframes(scans, config.keyframe_spacing):
         builder.add_keyframe(scan.pose, scan.load_points())
     builder.finish()

@@ -73,7 +73,7 @@ def ensure_blocks(global_map: Path, ground_truth: Path, block_dir: Path, block_s
     )
     points = xyz_array(read_pcd(global_map).points)
     scans = map_scans(points, read_tum(ground_truth), DEFAULT_SCAN_RADIUS)
-    builder = build_blocks(scans, config, sets=MapSubsets(points))
+    builder = build_blocks(scans, config, sets=MapSubsets(points, config.voxel))
     extras = ((b.points, b.centroid, {"keyframes": b.keyframes}) for b in builder.blocks)
     write_block_dir(block_dir, extras, "keyframe_blocks", params, builder.map_points(), force=True)
     return block_dir

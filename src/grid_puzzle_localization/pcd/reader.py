@@ -41,6 +41,11 @@ def xyz_array(points: np.ndarray) -> np.ndarray:
     return out
 
 
+def finite_xyz(records: np.ndarray) -> np.ndarray:
+    """Mask of the records whose x, y and z are all finite."""
+    return np.isfinite(records["x"]) & np.isfinite(records["y"]) & np.isfinite(records["z"])
+
+
 class PcdChunks:
     """Iterator over the finite points of a PCD file as structured arrays of at most ``chunk_points``
     records. ``header`` is known at once; ``points_kept`` and ``nonfinite_dropped`` grow while
@@ -63,7 +68,7 @@ class PcdChunks:
 
     def __next__(self) -> np.ndarray:
         block = next(self._blocks)
-        mask = np.isfinite(block["x"]) & np.isfinite(block["y"]) & np.isfinite(block["z"])
+        mask = finite_xyz(block)
         kept = np.array(block) if mask.all() else np.asarray(block[mask])
         self.points_kept += len(kept)
         self.nonfinite_dropped += len(block) - len(kept)

@@ -67,14 +67,19 @@ def array_to_cloud(points: np.ndarray, frame_id: str = "", stamp=None, header: H
     return cloud_from_parts([points], points.dtype, frame_id, stamp, header)
 
 
+def check_parts(parts: Sequence[np.ndarray], dtype: np.dtype) -> None:
+    """Raises ValueError unless every part is a C-contiguous array of ``dtype``."""
+    for part in parts:
+        if part.dtype != dtype or not part.flags.c_contiguous:
+            raise ValueError(f"every part must be a contiguous array of {dtype} (got {part.dtype})")
+
+
 def cloud_from_parts(
     parts: Sequence[np.ndarray], dtype: np.dtype, frame_id: str = "", stamp=None, header: Header | None = None
 ) -> PointCloud2:
     """One unorganised PointCloud2 of several arrays of the same dtype, copied once straight into the
     message's data (no concatenated intermediate array)."""
-    for part in parts:
-        if part.dtype != dtype or not part.flags.c_contiguous:
-            raise ValueError(f"every part must be a contiguous array of {dtype} (got {part.dtype})")
+    check_parts(parts, dtype)
     msg = PointCloud2()
     msg.header = header if header is not None else Header(frame_id=frame_id)
     if stamp is not None:

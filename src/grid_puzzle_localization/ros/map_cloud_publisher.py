@@ -34,8 +34,7 @@ class MapCloudPublisher:
             self._pub = rospy.Publisher("map_cloud", PointCloud2, latch=True, queue_size=None)
         self._cond = threading.Condition()
         self._pending: rospy.Time | None = None  # stamp of the newest window not yet published
-        self._thread = threading.Thread(target=self._run, name="map_cloud_publisher", daemon=True)
-        self._thread.start()
+        threading.Thread(target=self._run, name="map_cloud_publisher", daemon=True).start()
 
     def changed(self, stamp: rospy.Time) -> None:
         """The loaded window changed (at ``stamp``): publish it when the period allows. Never blocks."""

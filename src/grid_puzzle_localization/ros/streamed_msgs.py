@@ -24,7 +24,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
 from grid_puzzle_localization.msg import TileDelta
-from grid_puzzle_localization.ros.cloud_msg import byte_order_is_big, fields_of
+from grid_puzzle_localization.ros.cloud_msg import byte_order_is_big, check_parts, fields_of
 
 _U32 = struct.Struct("<I")
 _HEADER = struct.Struct("<3I")  # seq, stamp secs, stamp nsecs
@@ -71,12 +71,6 @@ def _cloud_prefix(header: bytes, dtype: np.dtype, width: int) -> bytes:
     )
 
 
-def _checked(parts: Sequence[np.ndarray], dtype: np.dtype) -> None:
-    for part in parts:
-        if part.dtype != dtype or not part.flags.c_contiguous:
-            raise ValueError(f"every part must be a contiguous array of {dtype} (got {part.dtype})")
-
-
 def _reserve(buff, nbytes: int) -> None:
     """Grows a BytesIO once to hold ``nbytes`` more from its position, instead of step by step through
     the many writes that follow (each growth by 1/8 reallocates)."""
@@ -112,7 +106,7 @@ class StreamedCloud(PointCloud2):
 
     def serialize(self, buff) -> None:
         parts = self._source()
-        _checked(parts, self._dtype)
+        check_parts(parts, self._dtype)
         prefix = _cloud_prefix(_header(self.header), self._dtype, sum(len(p) for p in parts))
         _reserve(buff, len(prefix) + sum(p.nbytes for p in parts) + 1)
         _write_cloud(buff, prefix, parts, self.is_dense)
@@ -133,7 +127,7 @@ class StreamedTileDelta(TileDelta):
         cloud_header = _header(Header(frame_id=self.header.frame_id, stamp=self.header.stamp))
         prefixes = []
         for points in self._added_points:
-            _checked([points], points.dtype)
+            check_parts([points], points.dtype)
             prefixes.append(_cloud_prefix(cloud_header, points.dtype, len(points)))
         head = b"".join(
             [

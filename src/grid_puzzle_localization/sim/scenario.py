@@ -233,7 +233,7 @@ def generate(cfg: ScenarioConfig, out_dir: str | os.PathLike, force: bool = Fals
     mapping = mapping_trajectory(world, loc, _rng(cfg.seed, 2))
     movers = make_movers(world, cfg.scale, loc.duration, cfg.movers, _rng(cfg.seed, 7))
     mount = Mount(np.array(MOUNTS[cfg.world]), np.eye(3))
-    with atomic_directory(out) as tmp, RayCaster(world.mesh, threads=1) as caster:
+    with atomic_directory(out, durable=True) as tmp, RayCaster(world.mesh, threads=1) as caster:
         sim = SweepSimulator(world.mesh, caster, get_sensor(cfg.sensor), mount)
         (tmp / "scenario.yaml").write_text(
             yaml.safe_dump(_describe(cfg, world, loc, mapping, mount, movers), sort_keys=False)
@@ -246,9 +246,6 @@ def generate(cfg: ScenarioConfig, out_dir: str | os.PathLike, force: bool = Fals
             tmp / "global_map.pcd", cfg, sim, mapping, mount, progress
         )
         end, cpu_end = time.perf_counter(), time.process_time()
-        for name in FILES:  # on disk before the directory is published
-            with open(tmp / name, "rb") as f:
-                os.fsync(f.fileno())
     return Summary(
         out,
         loc.duration,
