@@ -48,8 +48,9 @@ def finite_xyz(records: np.ndarray) -> np.ndarray:
 
 class PcdChunks:
     """Iterator over the finite points of a PCD file as structured arrays of at most ``chunk_points``
-    records. ``header`` is known at once; ``points_kept`` and ``nonfinite_dropped`` grow while
-    iterating and are final once the iterator is exhausted."""
+    records; a chunk without NaN/inf points may be a read-only view of the file. ``header`` is known
+    at once; ``points_kept`` and ``nonfinite_dropped`` grow while iterating and are final once the
+    iterator is exhausted."""
 
     def __init__(self, path: str | os.PathLike, chunk_points: int = 1_000_000):
         if chunk_points < 1:
@@ -69,7 +70,7 @@ class PcdChunks:
     def __next__(self) -> np.ndarray:
         block = next(self._blocks)
         mask = finite_xyz(block)
-        kept = np.array(block) if mask.all() else np.asarray(block[mask])
+        kept = np.asarray(block if mask.all() else block[mask])  # a plain array, even of a mapping
         self.points_kept += len(kept)
         self.nonfinite_dropped += len(block) - len(kept)
         return kept
@@ -79,9 +80,12 @@ class PcdChunks:
         check_binary_size(h, os.path.getsize(self.path) - h.header_bytes, self.path)
         if h.points == 0:
             return
-        records = np.memmap(self.path, dtype=h.dtype, mode="r", offset=h.header_bytes, shape=(h.points,))
         for start in range(0, h.points, self.chunk_points):
-            yield records[start : start + self.chunk_points]
+            # A mapping per chunk: its pages leave the resident set once the chunk is dropped, so a
+            # file larger than RAM streams in bounded memory.
+            count = min(self.chunk_points, h.points - start)
+            offset = h.header_bytes + start * h.record_bytes
+            yield np.memmap(self.path, dtype=h.dtype, mode="r", offset=offset, shape=(count,))
 
     def _compressed(self) -> Iterator[np.ndarray]:
         h = self.header
