@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.malloc_tuning import reuse_large_buffers
 from grid_puzzle_localization.tiling.tiler import TileConfig, tile_map
 from grid_puzzle_localization.tiling.verify import verify_tiles
 
@@ -53,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
         jobs=args.jobs,
         sync=not args.no_sync,
     )
+    reuse_large_buffers()  # each chunk's sort temporaries would otherwise fault in fresh pages
     result = tile_map(args.inputs, args.output, config)
     index = result.index
     if args.json:
