@@ -7,6 +7,7 @@ import time
 
 import pytest
 
+from grid_puzzle_localization.tiling import parallel
 from grid_puzzle_localization.tiling.parallel import in_background, map_ahead
 
 
@@ -115,3 +116,17 @@ def test_map_ahead_raises_the_job_error():
 
     with pytest.raises(ValueError, match="bad chunk 3"):
         list(map_ahead(fail_on_three, range(10), threads=2))
+
+
+def test_waiting_ends_when_the_children_exit_not_after_the_pause(monkeypatch):
+    monkeypatch.setattr(parallel, "WAIT_PAUSE_S", 60.0)  # were the pause not cut short, this would take a minute
+    calls = []
+
+    def job() -> None:
+        time.sleep(0.2)
+
+    start = time.monotonic()
+    with in_background([job], fork=True, while_waiting=lambda: calls.append(1)):
+        pass
+    assert time.monotonic() - start < 30.0
+    assert calls  # the child was still running when the block ended

@@ -9,6 +9,7 @@ points, which keeps input order. Only per-tile statistics (count, bounds) persis
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,25 +22,30 @@ _IOV_MAX = 1024
 
 @dataclass
 class TileSet:
-    """Every tile seen, in (i, j) order: its statistics and where its points are. Plain lists, so
-    per-tile access costs no numpy call (a writer touches each of ~1e5 tiles once)."""
+    """Every tile seen, in (i, j) order: its statistics and where its points are."""
 
     stats: np.ndarray  # GROUP_DTYPE row per tile: i, j, count, min, max [m] (chunk, start meaningless)
     spills: list[Path | None]  # per tile: its spill file, written first, or None
-    row_begin: list[int]  # per tile: its buffered rows are rows[row_begin:row_end]
-    row_end: list[int]
-    row_chunk: list[int]  # per buffered row: the chunk, and the byte range of the tile's points in it
-    row_first: list[int]
-    row_last: list[int]
+    row_begin: np.ndarray  # per tile: its buffered rows are rows[row_begin:row_end]
+    row_end: np.ndarray
+    row_chunk: np.ndarray  # per buffered row: the chunk, and the byte range of the tile's points in it
+    row_first: np.ndarray
+    row_last: np.ndarray
     chunks: list[np.ndarray]  # buffered chunks, raw bytes
 
     def __len__(self) -> int:
         return len(self.stats)
 
-    def parts(self, t: int) -> list[np.ndarray]:
-        """Tile ``t``'s buffered points (after its spill file), as byte slices in input order."""
-        c, a, b = self.row_chunk, self.row_first, self.row_last
-        return [self.chunks[c[r]][a[r] : b[r]] for r in range(self.row_begin[t], self.row_end[t])]
+    def parts(self, which: range) -> Iterator[list[np.ndarray]]:
+        """For each tile in ``which``: its buffered points (after its spill file), as byte slices in
+        input order. The columns become plain lists first, so that each of ~1e5 tiles costs no numpy
+        call; a writer process converts them for its own tiles only."""
+        begin = self.row_begin[which.start : which.stop].tolist()
+        end = self.row_end[which.start : which.stop].tolist()
+        chunk, first, last = (rows.tolist() for rows in (self.row_chunk, self.row_first, self.row_last))
+        chunks = self.chunks
+        for b, e in zip(begin, end, strict=True):
+            yield [chunks[chunk[r]][first[r] : last[r]] for r in range(b, e)]
 
 
 class TileBuffer:
@@ -69,10 +75,10 @@ class TileBuffer:
         rows, first, last = self._fold()
         buffered = self._tile_set(rows[first], [None] * len(first), first, last, rows)
         keys = zip(buffered.stats["i"].tolist(), buffered.stats["j"].tolist(), strict=True)
-        for t, (i, j) in enumerate(keys):
+        for (i, j), parts in zip(keys, buffered.parts(range(len(buffered))), strict=True):
             fd = os.open(self._spill_path(i, j), os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600)
             try:
-                write_all(fd, buffered.parts(t))
+                write_all(fd, parts)
             finally:
                 os.close(fd)
         self._spilled.append((rows["i"][first], rows["j"][first]))
@@ -113,16 +119,7 @@ class TileBuffer:
     ) -> TileSet:
         start = rows["start"] * self.record_bytes
         end = start + rows["count"] * self.record_bytes
-        return TileSet(
-            stats,
-            spills,
-            row_begin.tolist(),
-            row_end.tolist(),
-            rows["chunk"].tolist(),
-            start.tolist(),
-            end.tolist(),
-            self._chunks,
-        )
+        return TileSet(stats, spills, row_begin, row_end, rows["chunk"], start, end, self._chunks)
 
     def _spill_path(self, i: int, j: int) -> Path:
         return self.spill_dir / f"{i}_{j}.bin"

@@ -11,6 +11,7 @@ from __future__ import annotations
 import collections
 import contextlib
 import os
+import select
 import sys
 import traceback
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -19,6 +20,8 @@ from typing import TypeVar
 
 T = TypeVar("T")
 R = TypeVar("R")
+
+WAIT_PAUSE_S = 0.01  # longest pause between calls of while_waiting
 
 
 def map_ahead(fn: Callable[[T], R], items: Iterable[T], threads: int) -> Iterator[R]:
@@ -45,41 +48,48 @@ def in_background(
     """Runs each job in its own forked child during the with-block (or, with ``fork`` False, all of
     them right away in this process). Leaving the block waits for every child, even when the block
     raised, so no child outlives its caller; a failed child raises OSError. ``while_waiting`` is called
-    again and again while the children are still running after the block (the tiler flushes the files
-    they have written so far, so that little is left to flush at the end)."""
+    again and again while the children are still running after the block, with a pause of up to
+    WAIT_PAUSE_S that ends early when a child exits (the tiler flushes the files they have written so
+    far, so that little is left to flush at the end)."""
     if not (fork and hasattr(os, "fork")):
         for job in jobs:
             job()
         yield
         return
-    pids = []
+    children: dict[int, int] = {}  # pid -> pidfd, readable once the child has exited
     try:
         for job in jobs:
             pid = os.fork()
             if pid == 0:  # child: never return into the caller's stack
                 _run_child(job)
-            pids.append(pid)
+            children[pid] = os.pidfd_open(pid)
         yield
     finally:
-        codes = _wait_for(pids, while_waiting)
+        try:
+            codes = _wait_for(children, while_waiting)
+        finally:
+            for pidfd in children.values():
+                os.close(pidfd)
     failed = [code for code in codes if code != 0]
     if failed:
         raise OSError(f"a tile writer process failed (exit status {failed[0]}); see the error above")
 
 
-def _wait_for(pids: list[int], while_waiting: Callable[[], None] | None) -> list[int]:
-    """Exit codes of the children ``pids``, calling ``while_waiting`` between polls while any runs."""
+def _wait_for(children: dict[int, int], while_waiting: Callable[[], None] | None) -> list[int]:
+    """Exit codes of the children (pid -> pidfd), calling ``while_waiting`` between waits while any runs."""
     codes: dict[int, int] = {}
-    while len(codes) < len(pids):
-        for pid in pids:
+    while len(codes) < len(children):
+        for pid in children:
             if pid in codes:
                 continue
             done, status = os.waitpid(pid, os.WNOHANG if while_waiting else 0)
             if done:
                 codes[pid] = os.waitstatus_to_exitcode(status)
-        if while_waiting is not None and len(codes) < len(pids):
+        running = [pidfd for pid, pidfd in children.items() if pid not in codes]
+        if while_waiting is not None and running:
             while_waiting()
-    return [codes[pid] for pid in pids]
+            select.select(running, [], [], WAIT_PAUSE_S)
+    return [codes[pid] for pid in children]
 
 
 def _run_child(job: Callable[[], None]) -> None:

@@ -42,7 +42,6 @@ _CHUNK_SHARE = 0.30
 _BUFFER_SHARE = 0.55
 _CHUNK_OVERHEAD_BYTES = 128  # float64/int64 temporaries per point while grouping a chunk
 MIN_TILES_TO_FORK = 2000  # below this a fork costs more than it saves
-_FLUSH_PAUSE_S = 0.01  # between flushes while the writers run
 _POWERS_OF_TEN = 10 ** np.arange(19, dtype=np.int64)
 
 
@@ -102,19 +101,17 @@ def tile_map(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, co
         read = _stream(paths, headers, buffer, s, chunk_points, jobs, show)
         streamed = time.perf_counter()
         tiles = buffer.finish()
-        stats = tiles.stats
-        names = [tile_filename(i, j, s) for i, j in zip(stats["i"].tolist(), stats["j"].tolist(), strict=True)]
         header = _TileHeader.like(headers[0])
         fork = jobs > 1 and len(tiles) >= MIN_TILES_TO_FORK
         writers = jobs if fork else 1
         bounds = [len(tiles) * k // writers for k in range(writers + 1)]
         writer_jobs = [
-            functools.partial(_write_tile_files, tiles, names, header, tmp, range(a, b), show and a == 0)
+            functools.partial(_write_tile_files, tiles, s, header, tmp, range(a, b), show and a == 0)
             for a, b in itertools.pairwise(bounds)
         ]
         flush = functools.partial(_flush_written, tmp) if config.sync else None
         with in_background(writer_jobs, fork=fork, while_waiting=flush):
-            index = _tile_index(s, headers[0], read, tiles, names, header)
+            index = _tile_index(s, headers[0], read, tiles, _tile_names(tiles, s, range(len(tiles))), header)
             write_index(tmp, index)
             write_autoware_metadata(tmp, index)
         if buffer.spill_dir.exists():
@@ -176,7 +173,7 @@ class _TileHeader:
 
 def _write_tile_files(
     tiles: TileSet,
-    names: list[str],
+    s: float,
     header: _TileHeader,
     directory: Path,
     which: range,
@@ -184,30 +181,37 @@ def _write_tile_files(
 ) -> None:
     """Creates tile files ``which`` in ``directory`` (itself atomic, so files are written in place):
     one open, one writev and one close each when the tile did not spill."""
-    counts = tiles.stats["count"].tolist()
+    counts = tiles.stats["count"][which.start : which.stop].tolist()
+    tile_files = zip(_tile_names(tiles, s, which), counts, which, tiles.parts(which), strict=True)
     dir_fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)  # names resolve relative to it: no path work
     try:
-        for t in _progress(show, which, desc=f"writing tiles {which.start}-{which.stop - 1}", unit="tile"):
-            fd = os.open(names[t], os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644, dir_fd=dir_fd)
+        desc = f"writing tiles {which.start}-{which.stop - 1}"
+        for name, count, t, parts in _progress(show, tile_files, total=len(which), desc=desc, unit="tile"):
+            fd = os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644, dir_fd=dir_fd)
             try:
-                head = [header.of(counts[t])]
+                head = [header.of(count)]
                 spill = tiles.spills[t]
                 if spill is not None:
                     write_all(fd, head)
                     _append_file(fd, spill)
                     head = []
-                write_all(fd, head + tiles.parts(t))
+                write_all(fd, head + parts)
             finally:
                 os.close(fd)
     finally:
         os.close(dir_fd)
 
 
+def _tile_names(tiles: TileSet, s: float, which: range) -> list[str]:
+    """File names of tiles ``which``: each writer names its own tiles, the index names them all."""
+    stats = tiles.stats[which.start : which.stop]
+    return [tile_filename(i, j, s) for i, j in zip(stats["i"].tolist(), stats["j"].tolist(), strict=True)]
+
+
 def _flush_written(directory: Path) -> None:
-    """Flushes the tiles written so far, then pauses: writeback overlaps the writers (on the other
-    core), and the final syncfs only has the last files to do."""
+    """Flushes the tiles written so far (called every WAIT_PAUSE_S while the writers run): writeback
+    overlaps the writers (on the other core), and the final syncfs only has the last files to do."""
     sync_filesystem(directory)
-    time.sleep(_FLUSH_PAUSE_S)
 
 
 def _append_file(fd: int, path: Path) -> None:
