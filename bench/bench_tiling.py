@@ -1,7 +1,9 @@
 #!/usr/bin/env python3
 """Benchmark of `gpm tile`: the real campus map (nova_utd_tiles, 5.05 M points) merged into one
 global PCD (not timed), re-cut with s = 2 m under --memory-mb 200 in a child process whose wall time
-and peak RSS are measured. Prints one JSON line (median over repeats, with hardware info).
+and peak RSS are measured. Prints one JSON line (median over repeats, with hardware info). One more
+run on a map four times as large (the campus map merged four times) shows that peak RSS does not
+grow with the map.
 
 By default everything goes to the repo's file system (a temporary directory under build/), where a
 user's tiles would go; --tmp-dir /dev/shm times the tiler without a disk. Each repeat writes a fresh
@@ -66,10 +68,10 @@ def main() -> int:
         campus = Path(tmp) / "campus.pcd"
         points_in = merge_pcds(inputs, campus)
         seconds, rss, phases = [], [], []
+        command = [sys.executable, "-c", GPM, "tile", "--json", "--grid-size", f"{args.grid_size:g}"]
         for k in range(args.repeats):
             out = Path(tmp) / f"tiles{k}"
             os.sync()  # flush earlier writes so they do not count against this run
-            command = [sys.executable, "-c", GPM, "tile", "--json", "--grid-size", f"{args.grid_size:g}"]
             wall, peak, summary = run_child(
                 [*command, "--memory-mb", f"{args.memory_mb:g}", "--jobs", str(args.jobs), str(campus), "-o", str(out)]
             )
@@ -78,6 +80,12 @@ def main() -> int:
             phases.append(summary)
         index = load_tile_index(out)
         median = statistics.median(seconds)
+        # Memory must not grow with the map: the same budget on one file four times as large.
+        large = Path(tmp) / "campus_x4.pcd"
+        merge_pcds([campus] * 4, large)
+        _, rss_x4, _ = run_child(
+            [*command, "--memory-mb", f"{args.memory_mb:g}", "--jobs", str(args.jobs), str(large), "-o", f"{tmp}/x4"]
+        )
         print(
             json.dumps(
                 {
@@ -90,6 +98,7 @@ def main() -> int:
                     "seconds": round(median, 3),
                     "points_per_s": round(points_in / median),
                     "peak_rss_mb": round(max(rss), 1),
+                    "peak_rss_mb_map_x4": round(rss_x4, 1),  # one run on the campus map merged 4 times
                     "bytes_in": campus.stat().st_size,
                     "bytes_tiles_data": sum(index.table.points) * index.record_bytes,
                     "bytes_tiles_total": sum(index.table.bytes),

@@ -13,9 +13,7 @@ import numpy as np
 
 from grid_puzzle_localization.errors import PcdError
 from grid_puzzle_localization.pcd.header import parse_header
-from grid_puzzle_localization.pcd.reader import XYZ, check_binary_size, check_xyz, finite_xyz, read_pcd
-
-XYZ_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
+from grid_puzzle_localization.pcd.reader import XYZ, XYZ_DTYPE, check_binary_size, check_xyz, finite_xyz, read_pcd
 
 
 def read_tile(path: str | os.PathLike, xyz_only: bool = True) -> np.ndarray:

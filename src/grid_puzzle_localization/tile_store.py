@@ -24,8 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from grid_puzzle_localization.errors import PcdError
+from grid_puzzle_localization.pcd.reader import XYZ_DTYPE
 from grid_puzzle_localization.tile_directory import TileDirectory, decode_key
-from grid_puzzle_localization.tile_reader import XYZ_DTYPE, read_tile
+from grid_puzzle_localization.tile_reader import read_tile
 from grid_puzzle_localization.window import Window
 
 Key = tuple[int, int]  # (i, j); internally tiles are keyed by their int64 code (tile_directory.encode_keys)

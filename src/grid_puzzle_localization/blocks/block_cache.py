@@ -6,8 +6,9 @@ from collections import OrderedDict
 
 import numpy as np
 
-from grid_puzzle_localization.blocks.store import XYZ32, BlockIndex
+from grid_puzzle_localization.blocks.store import BlockIndex
 from grid_puzzle_localization.pcd import read_pcd
+from grid_puzzle_localization.pcd.reader import XYZ_DTYPE
 
 
 class BlockCache:
@@ -16,14 +17,14 @@ class BlockCache:
     def __init__(self, index: BlockIndex, cache_blocks: int = 0) -> None:
         self.index = index
         self.cache_blocks = max(0, int(cache_blocks))
-        self._blocks: OrderedDict[int, np.ndarray] = OrderedDict()  # position -> XYZ32 records, LRU order
+        self._blocks: OrderedDict[int, np.ndarray] = OrderedDict()  # position -> XYZ_DTYPE records, LRU order
         self.loads = 0  # block files read so far
 
     def __len__(self) -> int:
         return len(self._blocks)
 
     def merged(self, selection: tuple[int, ...]) -> np.ndarray:
-        """The union of the selected blocks as XYZ32 records, exact duplicate points (the shared part of
+        """The union of the selected blocks as XYZ_DTYPE records, exact duplicate points (the shared part of
         overlapping fixed-size submaps) kept once. Blocks outside the selection and the cache are freed."""
         parts = [self._get(position) for position in selection]
         for position in list(self._blocks):
@@ -31,7 +32,7 @@ class BlockCache:
                 break
             if position not in selection:
                 del self._blocks[position]
-        merged = np.concatenate(parts) if parts else np.empty(0, dtype=XYZ32)
+        merged = np.concatenate(parts) if parts else np.empty(0, dtype=XYZ_DTYPE)
         if len(parts) > 1:
             merged = np.unique(merged)  # sorts by (x, y, z); the cloud is unordered anyway
         return merged
@@ -41,8 +42,8 @@ class BlockCache:
             self._blocks.move_to_end(position)
             return self._blocks[position]
         points = read_pcd(self.index.directory / self.index.blocks[position].file).points
-        records = np.empty(len(points), dtype=XYZ32)
-        for name in XYZ32.names:
+        records = np.empty(len(points), dtype=XYZ_DTYPE)
+        for name in XYZ_DTYPE.names:
             records[name] = points[name]
         self._blocks[position] = records
         self.loads += 1

@@ -25,12 +25,12 @@ import yaml
 from grid_puzzle_localization.atomic import atomic_directory, check_output_dir
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array
+from grid_puzzle_localization.pcd.reader import XYZ_DTYPE
 
 FORMAT = "gpm_block_map"
 VERSION = 1
 INDEX_FILE = "index.yaml"
 CENTROIDS_FILE = "centroids.txt"
-XYZ32 = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
 
 
 @dataclass(frozen=True)
@@ -63,7 +63,7 @@ class BlockIndex:
 
 
 def _to_record(points: np.ndarray) -> np.ndarray:
-    record = np.empty(len(points), dtype=XYZ32)
+    record = np.empty(len(points), dtype=XYZ_DTYPE)
     for k, name in enumerate("xyz"):
         record[name] = points[:, k]
     return record

@@ -22,6 +22,7 @@ from grid_puzzle_localization.pcd.ascii_codec import decode_ascii_lines
 from grid_puzzle_localization.pcd.header import PcdHeader, read_pcd_header
 
 XYZ = ("x", "y", "z")
+XYZ_DTYPE = np.dtype([(name, "<f4") for name in XYZ])  # x, y, z as float32: 12 bytes a point
 
 
 @dataclass

@@ -16,9 +16,8 @@ from std_msgs.msg import Header
 from tf2_msgs.msg import TFMessage
 
 from grid_puzzle_localization import synthetic_scene as ss
+from grid_puzzle_localization.pcd.reader import XYZ_DTYPE
 from grid_puzzle_localization.ros.cloud_msg import array_to_cloud
-
-XYZ_DTYPE = np.dtype([("x", np.float32), ("y", np.float32), ("z", np.float32)])
 
 
 def xyz_cloud(points: np.ndarray, header: Header) -> PointCloud2:
