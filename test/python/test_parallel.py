@@ -1,6 +1,8 @@
 """The forked background jobs (each runs exactly once, beside the caller, and a failure surfaces) and the
 thread pool that groups chunks ahead (results in order, bounded work in flight)."""
 
+import functools
+import json
 import os
 import threading
 import time
@@ -8,7 +10,7 @@ import time
 import pytest
 
 from grid_puzzle_localization.tiling import parallel
-from grid_puzzle_localization.tiling.parallel import in_background, map_ahead
+from grid_puzzle_localization.tiling.parallel import SharedBatches, in_background, map_ahead
 
 
 @pytest.mark.parametrize("fork", [True, False])
@@ -130,3 +132,20 @@ def test_waiting_ends_when_the_children_exit_not_after_the_pause(monkeypatch):
         pass
     assert time.monotonic() - start < 30.0
     assert calls  # the child was still running when the block ended
+
+
+@pytest.mark.parametrize("total", [0, 1, 63, 64, 65, 1000, 100_003])
+def test_shared_batches_hand_every_item_to_exactly_one_of_several_processes(tmp_path, total):
+    with SharedBatches(total) as batches:
+
+        def job(name: str) -> None:
+            taken = [(which.start, which.stop) for which in batches]
+            (tmp_path / name).write_text(json.dumps(taken))
+
+        with in_background([functools.partial(job, "a"), functools.partial(job, "b")], fork=True):
+            job("caller")
+    taken = [pair for name in ("a", "b", "caller") for pair in json.loads((tmp_path / name).read_text())]
+    items = sorted(k for start, stop in taken for k in range(start, stop))
+    assert items == list(range(total))  # each exactly once
+    assert len(taken) <= 512  # the whole queue fits one atomic pipe write
+    assert all(stop - start == batches.size for start, stop in taken if stop != total)

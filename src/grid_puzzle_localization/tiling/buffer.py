@@ -37,14 +37,17 @@ class TileSet:
         return len(self.stats)
 
     def parts(self, which: range) -> Iterator[list[np.ndarray]]:
-        """For each tile in ``which``: its buffered points (after its spill file), as byte slices in
-        input order. The columns become plain lists first, so that each of ~1e5 tiles costs no numpy
-        call; a writer process converts them for its own tiles only."""
-        begin = self.row_begin[which.start : which.stop].tolist()
-        end = self.row_end[which.start : which.stop].tolist()
-        chunk, first, last = (rows.tolist() for rows in (self.row_chunk, self.row_first, self.row_last))
+        """For each tile of the consecutive tiles ``which``: its buffered points (after its spill file),
+        as byte slices in input order. Their rows are consecutive too; those columns become plain lists
+        first, so that a tile costs no numpy call."""
+        begin = self.row_begin[which.start : which.stop]
+        end = self.row_end[which.start : which.stop]
+        filled = end > begin
+        low = int(begin[filled].min()) if filled.any() else 0
+        high = int(end[filled].max()) if filled.any() else 0
+        chunk, first, last = (rows[low:high].tolist() for rows in (self.row_chunk, self.row_first, self.row_last))
         chunks = self.chunks
-        for b, e in zip(begin, end, strict=True):
+        for b, e in zip((begin - low).tolist(), (end - low).tolist(), strict=True):
             yield [chunks[chunk[r]][first[r] : last[r]] for r in range(b, e)]
 
 

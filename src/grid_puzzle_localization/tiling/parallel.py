@@ -3,7 +3,8 @@ GIL in its sorts, gathers and ufuncs), and jobs run in forked children while the
 
 The tiler creates tens of thousands of small files (system-call bound) in children while the parent
 builds and writes the index. The children share the parent's buffers copy-on-write: nothing is
-copied or pickled.
+copied or pickled. They take their work in batches from a shared queue (SharedBatches), so that they
+finish together however unevenly the work is spread.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import collections
 import contextlib
 import os
 import select
+import struct
 import sys
 import traceback
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -22,6 +24,36 @@ T = TypeVar("T")
 R = TypeVar("R")
 
 WAIT_PAUSE_S = 0.01  # longest pause between calls of while_waiting
+_BATCH = struct.Struct("<q")  # a batch in the queue: the index of its first item
+_MAX_BATCHES = select.PIPE_BUF // _BATCH.size  # the whole queue is one atomic pipe write
+_MIN_BATCH_ITEMS = 64
+
+
+class SharedBatches:
+    """The items 0 .. total-1 in consecutive batches, handed out on demand to whoever iterates: the
+    caller and the children it forks afterwards share one queue, a pipe filled at creation, so each
+    batch goes to exactly one of them and faster workers take more. At most _MAX_BATCHES batches (one
+    atomic pipe write, so filling never blocks); use as a context manager to close the pipe."""
+
+    def __init__(self, total: int):
+        self.total = total
+        self.size = max(_MIN_BATCH_ITEMS, -(-total // _MAX_BATCHES))
+        self._read_end, write_end = os.pipe()
+        try:
+            os.write(write_end, b"".join(_BATCH.pack(start) for start in range(0, total, self.size)))
+        finally:
+            os.close(write_end)  # once the batches are taken, readers see the end of the pipe
+
+    def __iter__(self) -> Iterator[range]:
+        while item := os.read(self._read_end, _BATCH.size):
+            (start,) = _BATCH.unpack(item)
+            yield range(start, min(start + self.size, self.total))
+
+    def __enter__(self) -> SharedBatches:
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        os.close(self._read_end)
 
 
 def map_ahead(fn: Callable[[T], R], items: Iterable[T], threads: int) -> Iterator[R]:

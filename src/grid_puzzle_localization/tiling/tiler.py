@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import itertools
 import os
 import sys
 import time
@@ -35,7 +34,7 @@ from grid_puzzle_localization.pcd.reader import check_xyz
 from grid_puzzle_localization.tiling.buffer import TileBuffer, TileSet, write_all
 from grid_puzzle_localization.tiling.grouping import group_chunk
 from grid_puzzle_localization.tiling.index import TileIndex, TileTable, write_autoware_metadata, write_index
-from grid_puzzle_localization.tiling.parallel import in_background, map_ahead
+from grid_puzzle_localization.tiling.parallel import SharedBatches, in_background, map_ahead
 
 MIN_MEMORY_MB = 1.0
 _CHUNK_SHARE = 0.30
@@ -104,16 +103,16 @@ def tile_map(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, co
         header = _TileHeader.like(headers[0])
         fork = jobs > 1 and len(tiles) >= MIN_TILES_TO_FORK
         writers = jobs if fork else 1
-        bounds = [len(tiles) * k // writers for k in range(writers + 1)]
-        writer_jobs = [
-            functools.partial(_write_tile_files, tiles, s, header, tmp, range(a, b), show and a == 0)
-            for a, b in itertools.pairwise(bounds)
-        ]
         flush = functools.partial(_flush_written, tmp) if config.sync else None
-        with in_background(writer_jobs, fork=fork, while_waiting=flush):
-            index = _tile_index(s, headers[0], read, tiles, _tile_names(tiles, s, range(len(tiles))), header)
-            write_index(tmp, index)
-            write_autoware_metadata(tmp, index)
+        with SharedBatches(len(tiles)) as batches:
+            writer_jobs = [
+                functools.partial(_write_tile_files, tiles, s, header, tmp, batches, show and k == 0, writers)
+                for k in range(writers)
+            ]
+            with in_background(writer_jobs, fork=fork, while_waiting=flush):
+                index = _tile_index(s, headers[0], read, tiles, _tile_names(tiles, s, range(len(tiles))), header)
+                write_index(tmp, index)
+                write_autoware_metadata(tmp, index)
         if buffer.spill_dir.exists():
             buffer.spill_dir.rmdir()
         written = time.perf_counter()
@@ -176,30 +175,37 @@ def _write_tile_files(
     s: float,
     header: _TileHeader,
     directory: Path,
-    which: range,
+    batches: SharedBatches,
     show: bool,
+    writers: int,
 ) -> None:
-    """Creates tile files ``which`` in ``directory`` (itself atomic, so files are written in place):
-    one open, one writev and one close each when the tile did not spill."""
-    counts = tiles.stats["count"][which.start : which.stop].tolist()
-    tile_files = zip(_tile_names(tiles, s, which), counts, which, tiles.parts(which), strict=True)
+    """Creates the tile files of the batches it takes in ``directory`` (itself atomic, so files are
+    written in place): one open, one writev and one close each when the tile did not spill."""
     dir_fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)  # names resolve relative to it: no path work
     try:
-        desc = f"writing tiles {which.start}-{which.stop - 1}"
-        for name, count, t, parts in _progress(show, tile_files, total=len(which), desc=desc, unit="tile"):
-            fd = os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644, dir_fd=dir_fd)
-            try:
-                head = [header.of(count)]
-                spill = tiles.spills[t]
-                if spill is not None:
-                    write_all(fd, head)
-                    _append_file(fd, spill)
-                    head = []
-                write_all(fd, head + parts)
-            finally:
-                os.close(fd)
+        share = len(tiles) // writers  # about what each writer takes
+        with _progress(show, total=share, desc=f"writing tiles (writer 1 of {writers})", unit="tile") as bar:
+            for which in batches:
+                counts = tiles.stats["count"][which.start : which.stop].tolist()
+                batch = zip(_tile_names(tiles, s, which), counts, which, tiles.parts(which), strict=True)
+                for name, count, t, parts in batch:
+                    _write_tile_file(dir_fd, name, header.of(count), tiles.spills[t], parts)
+                bar.update(len(which))
     finally:
         os.close(dir_fd)
+
+
+def _write_tile_file(dir_fd: int, name: str, head: bytes, spill: Path | None, parts: list[np.ndarray]) -> None:
+    fd = os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644, dir_fd=dir_fd)
+    try:
+        if spill is not None:
+            write_all(fd, [head])
+            _append_file(fd, spill)
+            write_all(fd, parts)
+        else:
+            write_all(fd, [head, *parts])
+    finally:
+        os.close(fd)
 
 
 def _tile_names(tiles: TileSet, s: float, which: range) -> list[str]:
