@@ -3,7 +3,8 @@
 global PCD (not timed), re-cut with s = 2 m under --memory-mb 200 in a child process whose wall time
 and peak RSS are measured. Prints one JSON line (median over repeats, with hardware info). One more
 run on a map four times as large (the campus map merged four times) shows that peak RSS does not
-grow with the map.
+grow with the map. After each repeat, the same files are created once more by a bare loop that does
+nothing else (file_creation_floor.py): the least this disk allows.
 
 By default everything goes to the repo's file system (a temporary directory under build/), where a
 user's tiles would go; --tmp-dir /dev/shm times the tiler without a disk. Each repeat writes a fresh
@@ -23,6 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from file_creation_floor import create_files
 from hardware import cpu_model
 
 from grid_puzzle_localization.pcd import merge_pcds
@@ -67,7 +69,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="bench_tiling_", dir=args.tmp_dir) as tmp:
         campus = Path(tmp) / "campus.pcd"
         points_in = merge_pcds(inputs, campus)
-        seconds, rss, phases = [], [], []
+        seconds, rss, phases, floor = [], [], [], []
         command = [sys.executable, "-c", GPM, "tile", "--json", "--grid-size", f"{args.grid_size:g}"]
         for k in range(args.repeats):
             out = Path(tmp) / f"tiles{k}"
@@ -78,6 +80,9 @@ def main() -> int:
             seconds.append(wall)
             rss.append(peak)
             phases.append(summary)
+            table = load_tile_index(out).table
+            files = list(zip(table.files, table.bytes, strict=True))
+            floor.append(create_files(Path(tmp) / f"files_only{k}", files, args.jobs))
         index = load_tile_index(out)
         median = statistics.median(seconds)
         # Memory must not grow with the map: the same budget on one file four times as large.
@@ -108,9 +113,12 @@ def main() -> int:
                     "seconds_write_median": round(statistics.median(p["seconds_write"] for p in phases), 3),
                     "seconds_sync_median": round(statistics.median(p["seconds_sync"] for p in phases), 3),
                     "stream_points_per_s": round(points_in / statistics.median(p["seconds_stream"] for p in phases)),
+                    "files_only_seconds_median": round(statistics.median(floor), 3),
                     "timing": "seconds: median wall time of the gpm process (Python start-up included);"
                     " stream: reading + grouping + spilling; write: creating the tile files and index, with"
-                    " the files written so far flushed to disk meanwhile; sync: the last syncfs and publishing OUT_DIR",
+                    " the files written so far flushed to disk meanwhile; sync: the last syncfs and publishing OUT_DIR;"
+                    " files_only: creating the same files (names, sizes) with the same flushing and nothing else,"
+                    " after each repeat (file_creation_floor.py)",
                     "cpu": cpu_model(),
                     "cores": os.cpu_count(),
                     "threads_used": args.jobs,  # chunks grouped on --jobs threads
