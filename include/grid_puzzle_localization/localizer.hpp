@@ -87,6 +87,7 @@ struct LocalizerOutput {
   /// This scan came after recovery.after_rejections rejected matches in a row: re-acquisition was tried.
   bool lost = false;
   int recovery_candidates = 0;  ///< extra alignments tried for re-acquisition on this scan
+  bool reacquired = false;      ///< one of them was accepted: the pose jumped to it (not motion)
   NdtResult ndt;                ///< the match (status INVALID_INPUT when no match was tried)
   PreprocessReport preprocess;
   double align_ms = 0.0;  ///< NDT only
@@ -126,8 +127,9 @@ class Localizer {
 
  private:
   bool acceptable(const NdtResult& r) const;
-  /// Matches from recovery guesses around `guess`; the best acceptable result, if any.
-  std::optional<NdtResult> reacquire(const Eigen::Isometry3d& guess, LocalizerOutput& out);
+  /// Matches from the next recovery guesses around `guess` (their number in `tries`); the best acceptable
+  /// result, if any.
+  std::optional<NdtResult> reacquire(const Eigen::Isometry3d& guess, int tries);
   /// The predicted sensor motion over the sweep [stamp + t_begin, stamp + t_end]; gyro rotation when covered.
   SweepMotion sweepMotion(double stamp, double t_begin, double t_end, const Eigen::Isometry3d& base_T_sensor,
                           bool fresh) const;

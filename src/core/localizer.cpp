@@ -115,14 +115,12 @@ void Localizer::reset() {
   rejected_in_a_row_ = 0;
 }
 
-std::optional<NdtResult> Localizer::reacquire(const Eigen::Isometry3d& guess, LocalizerOutput& out) {
+std::optional<NdtResult> Localizer::reacquire(const Eigen::Isometry3d& guess, int tries) {
   std::optional<NdtResult> best;
-  const int tries = std::min<int>(config_.recovery.candidates_per_scan, static_cast<int>(recovery_offsets_.size()));
   for (int k = 0; k < tries; ++k) {
     Eigen::Isometry3d candidate = guess;
     candidate.translation() += recovery_offsets_[next_recovery_offset_++ % recovery_offsets_.size()];
     NdtResult r = aligner_.align(*target_, source_, candidate.cast<float>());
-    ++out.recovery_candidates;
     if (acceptable(r) && (!best || r.nvtl > best->nvtl)) best = std::move(r);
   }
   return best;
@@ -216,11 +214,12 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
   out.match_accepted = acceptable(out.ndt);
   out.lost = config_.recovery.after_rejections > 0 && rejected_in_a_row_ >= config_.recovery.after_rejections;
-  bool reacquired = false;
   if (!out.match_accepted && out.lost) {
-    if (std::optional<NdtResult> found = reacquire(guess, out)) {
+    out.recovery_candidates =
+        std::min<int>(config_.recovery.candidates_per_scan, static_cast<int>(recovery_offsets_.size()));
+    if (std::optional<NdtResult> found = reacquire(guess, out.recovery_candidates)) {
       out.ndt = std::move(*found);
-      out.match_accepted = reacquired = true;
+      out.match_accepted = out.reacquired = true;
     }
   }
   out.pose = out.match_accepted ? toIsometry(out.ndt.transform) : guess;
@@ -233,7 +232,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   const double dt = stamp - predictor_.stamp();
   // After a new initial pose or a re-acquisition the match may move far from the guess: that jump is a
   // correction, not motion.
-  if (fresh || reacquired)
+  if (fresh || out.reacquired)
     predictor_.reset(out.pose, stamp);
   else
     predictor_.update(out.pose, stamp, config_.deskew_twist_smoothing);
@@ -241,7 +240,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   out.twist = predictor_.twist();
   out.covariance = out.match_accepted ? covarianceFromHessian(out.ndt.hessian, config_.covariance)
                                       : predictionCovariance(config_.covariance);
-  out.twist_covariance = out.match_accepted && !fresh && !reacquired && dt > 0.0
+  out.twist_covariance = out.match_accepted && !fresh && !out.reacquired && dt > 0.0
                              ? out.covariance * (2.0 / (dt * dt))
                              : predictionCovariance(config_.covariance);
   if (config_.output_aligned) {

@@ -161,7 +161,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     if (out.reset) NODELET_WARN("scan time went backwards (bag loop?): localizer reset");
     reportState(out.state);
     if (out.state != LocalizerState::kTracking) return;
-    if (out.lost && out.match_accepted && out.recovery_candidates > 0)
+    if (out.reacquired)
       NODELET_WARN(
           "re-acquired the map after %d or more rejected matches (best of %d guesses up to %.1f m around "
           "the prediction)",
