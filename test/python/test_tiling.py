@@ -30,7 +30,7 @@ from grid_puzzle_localization.tiling import (
     verify_tiles,
 )
 from grid_puzzle_localization.tiling.buffer import write_all
-from grid_puzzle_localization.tiling.grouping import key_positions, stable_tile_order
+from grid_puzzle_localization.tiling.grouping import key_positions
 from grid_puzzle_localization.tiling.index import TileEntry, TileIndex, TileTable, write_index
 from grid_puzzle_localization.tiling.tiler import MIN_TILES_TO_FORK, _TileHeader
 
@@ -150,17 +150,6 @@ def test_failure_leaves_no_output_behind(tmp_path):
     with pytest.raises(UserError, match=r"bad\.pcd: truncated"):
         tile_map([good, bad], tmp_path / "out", TileConfig(grid_size=1.0))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.pcd", "good.pcd"]
-
-
-@settings(max_examples=200, deadline=None)
-@given(
-    st.lists(st.tuples(st.integers(-(2**40), 2**40), st.integers(-(2**40), 2**40)), max_size=300),
-    st.integers(0, 3),
-)
-def test_radix_order_equals_stable_lexsort(keys, spread):
-    ij = np.array(keys, dtype=np.int64).reshape(-1, 2) >> (10 * spread)  # from wide to narrow key ranges
-    order = stable_tile_order(ij[:, 0], ij[:, 1])
-    np.testing.assert_array_equal(order, np.lexsort((ij[:, 1], ij[:, 0])))
 
 
 # ---- the real campus map: merged into one global PCD, re-cut, conserved ----
