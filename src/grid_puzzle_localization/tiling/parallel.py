@@ -1,5 +1,5 @@
-"""Using both cores: chunks grouped on a thread pool while the next one is read (numpy releases the
-GIL in its sorts, gathers and ufuncs), and jobs run in forked children while the caller goes on.
+"""Using both cores: chunks grouped on a thread pool while the next one is read (the grouping runs in
+C++ through ctypes, which releases the GIL), and jobs run in forked children while the caller goes on.
 
 The tiler creates tens of thousands of small files (system-call bound) in children while the parent
 builds and writes the index. The children share the parent's buffers copy-on-write: nothing is

@@ -39,7 +39,7 @@ from grid_puzzle_localization.tiling.parallel import SharedBatches, in_backgroun
 MIN_MEMORY_MB = 1.0
 _CHUNK_SHARE = 0.30
 _BUFFER_SHARE = 0.55
-_CHUNK_OVERHEAD_BYTES = 128  # float64/int64 temporaries per point while grouping a chunk
+_CHUNK_OVERHEAD_BYTES = 128  # per point while grouping a chunk: keys, counts and up to a group row each
 MIN_TILES_TO_FORK = 2000  # below this a fork costs more than it saves
 _POWERS_OF_TEN = 10 ** np.arange(19, dtype=np.int64)
 
