@@ -31,7 +31,7 @@ from grid_puzzle_localization.tiling import (
 )
 from grid_puzzle_localization.tiling.buffer import write_all
 from grid_puzzle_localization.tiling.grouping import key_positions
-from grid_puzzle_localization.tiling.index import TileEntry, TileIndex, TileTable, write_index
+from grid_puzzle_localization.tiling.index import JSON_BATCH, TileEntry, TileIndex, TileTable, write_index
 from grid_puzzle_localization.tiling.tiler import MIN_TILES_TO_FORK, _TileHeader
 
 FIELDS = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<u1"), ("t", "<f8"), ("n", "<f4", (2,))])
@@ -350,7 +350,7 @@ def test_index_text_is_what_json_would_write(tmp_path):
             "data_bytes": 12,
         },
     ]
-    assert table.json_text(2.0, 12) == json.dumps(expected, separators=(",", ":"))
+    assert "".join(table.json_parts(2.0, 12)) == json.dumps(expected, separators=(",", ":"))
     write_index(tmp_path, index)
     assert json.loads((tmp_path / "index.json").read_text())["tiles"] == expected
     loaded = load_tile_index(tmp_path)
@@ -360,6 +360,37 @@ def test_index_text_is_what_json_would_write(tmp_path):
         for e in expected
     ]
     assert loaded.tiles == as_entries
+
+
+@pytest.mark.parametrize("tiles", [0, 1, JSON_BATCH, 2 * JSON_BATCH + 5])
+def test_index_text_in_parts_is_what_json_would_write(tiles):
+    rng = np.random.default_rng(tiles)
+    i, j = rng.integers(-(10**6), 10**6, tiles).tolist(), rng.integers(-(10**6), 10**6, tiles).tolist()
+    table = TileTable(
+        i=i,
+        j=j,
+        files=[tile_filename(a, b, 0.3) for a, b in zip(i, j, strict=True)],
+        points=rng.integers(1, 10**6, tiles).tolist(),
+        bytes=rng.integers(200, 10**7, tiles).tolist(),
+        lower=rng.normal(0.0, 1e5, (3, tiles)).astype(np.float32).astype(float).tolist(),
+        upper=rng.normal(0.0, 1e5, (3, tiles)).tolist(),
+    )
+    expected = [
+        {
+            "key": [a, b],
+            "stem": f.removesuffix(".pcd"),
+            "file": f,
+            "center": [(a + 0.5) * 0.3, (b + 0.5) * 0.3],
+            "points": n,
+            "bounds": {"min": [x0, y0, z0], "max": [x1, y1, z1]},
+            "bytes": size,
+            "data_bytes": n * 16,
+        }
+        for a, b, f, n, size, x0, y0, z0, x1, y1, z1 in zip(
+            i, j, table.files, table.points, table.bytes, *table.lower, *table.upper, strict=True
+        )
+    ]
+    assert "".join(table.json_parts(0.3, 16)) == json.dumps(expected, separators=(",", ":"))
 
 
 @settings(max_examples=200, deadline=None)

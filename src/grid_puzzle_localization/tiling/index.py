@@ -32,6 +32,7 @@ lower-left corner ``[min_x, min_y]`` of its cell.
 from __future__ import annotations
 
 import functools
+import itertools
 import json
 import os
 from collections.abc import Iterator
@@ -46,6 +47,7 @@ INDEX_FILE = "index.json"
 AUTOWARE_METADATA_FILE = "pointcloud_map_metadata.yaml"
 FORMAT = "grid_puzzle_tiles"
 VERSION = 1
+JSON_BATCH = 1024  # tiles per part of the index text
 
 
 @dataclass(frozen=True)
@@ -118,17 +120,31 @@ class TileTable:
                 n * record_bytes,
             )
 
-    def json_text(self, grid_size: float, record_bytes: int) -> str:
-        """The tiles as a compact JSON array, formatted directly (a dict per tile for json.dumps costs
-        three times as much). Floats are written with repr, as json does; names need no escaping
-        (grid.tile_stem writes digits, '-', '.' and '_' only)."""
-        entries = ",".join(
-            f'{{"key":[{i},{j}],"stem":"{stem}","file":"{f}","center":[{cx!r},{cy!r}],"points":{n},'
-            f'"bounds":{{"min":[{x0!r},{y0!r},{z0!r}],"max":[{x1!r},{y1!r},{z1!r}]}},'
-            f'"bytes":{b},"data_bytes":{data}}}'
-            for i, j, stem, f, cx, cy, n, x0, y0, z0, x1, y1, z1, b, data in self.rows(grid_size, record_bytes)
-        )
-        return f"[{entries}]"
+    def json_parts(self, grid_size: float, record_bytes: int) -> Iterator[str]:
+        """The tiles as a compact JSON array, in parts of up to JSON_BATCH tiles that join into the whole
+        text: formatted directly (a dict per tile for json.dumps costs three times as much) and never
+        held whole (the index of 1e5 tiles is tens of MB). Floats are written with repr, as json does,
+        each distinct centre once; names need no escaping (grid.tile_stem writes digits, '-', '.' and
+        '_' only)."""
+        centres: dict[float, str] = {}
+
+        def text(c: float) -> str:
+            if c not in centres:
+                centres[c] = repr(c)
+            return centres[c]
+
+        rows = self.rows(grid_size, record_bytes)
+        separator = "["
+        while batch := list(itertools.islice(rows, JSON_BATCH)):
+            entries = ",".join(
+                f'{{"key":[{i},{j}],"stem":"{stem}","file":"{f}","center":[{text(cx)},{text(cy)}],"points":{n},'
+                f'"bounds":{{"min":[{x0!r},{y0!r},{z0!r}],"max":[{x1!r},{y1!r},{z1!r}]}},'
+                f'"bytes":{b},"data_bytes":{data}}}'
+                for i, j, stem, f, cx, cy, n, x0, y0, z0, x1, y1, z1, b, data in batch
+            )
+            yield f"{separator}{entries}"
+            separator = ","
+        yield "[]" if separator == "[" else "]"
 
 
 @dataclass
@@ -168,7 +184,8 @@ class TileIndex:
     def by_key(self) -> dict[tuple[int, int], TileEntry]:
         return {entry.key: entry for entry in self.tiles}
 
-    def json_text(self) -> str:
+    def json_parts(self) -> Iterator[str]:
+        """The index as compact JSON, in parts (see TileTable.json_parts)."""
         head = {
             "format": FORMAT,
             "version": VERSION,
@@ -180,13 +197,14 @@ class TileIndex:
             "nonfinite_dropped": self.nonfinite_dropped,
             "inputs": self.inputs,
         }
-        tiles = self.table.json_text(self.grid_size, self.record_bytes)
-        return f'{json.dumps(head, separators=(",", ":"))[:-1]},"tiles":{tiles}}}'
+        yield f'{json.dumps(head, separators=(",", ":"))[:-1]},"tiles":'
+        yield from self.table.json_parts(self.grid_size, self.record_bytes)
+        yield "}"
 
 
 def write_index(directory: Path, index: TileIndex) -> None:
-    with atomic_write(directory / INDEX_FILE, "wb", fsync=False) as f:
-        f.write(index.json_text().encode())
+    with atomic_write(directory / INDEX_FILE, "w", fsync=False, encoding="utf-8") as f:
+        f.writelines(index.json_parts())
 
 
 def write_autoware_metadata(directory: Path, index: TileIndex) -> None:
