@@ -1,11 +1,12 @@
 """The tiler against brute force: every finite point in exactly one tile, bit for bit and in input
 order, the tile being floor(x / s), floor(y / s) computed per point in plain Python."""
 
-import errno
 import json
 import math
 import os
+import resource
 import shutil
+import signal
 import subprocess
 import sys
 from collections import defaultdict
@@ -20,7 +21,7 @@ from hypothesis import strategies as st
 from grid_puzzle_localization.cli import main
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.grid import tile_filename
-from grid_puzzle_localization.pcd import read_pcd, read_pcd_header, write_pcd
+from grid_puzzle_localization.pcd import PcdHeader, read_pcd, read_pcd_header, write_pcd
 from grid_puzzle_localization.pcd.header import parse_header
 from grid_puzzle_localization.tiling import (
     AUTOWARE_METADATA_FILE,
@@ -29,10 +30,11 @@ from grid_puzzle_localization.tiling import (
     tile_map,
     verify_tiles,
 )
-from grid_puzzle_localization.tiling.buffer import write_all
-from grid_puzzle_localization.tiling.grouping import key_positions
+from grid_puzzle_localization.tiling.buffer import TileSet, write_all
+from grid_puzzle_localization.tiling.grouping import GROUP_DTYPE, key_positions
 from grid_puzzle_localization.tiling.index import JSON_BATCH, TileEntry, TileIndex, TileTable, write_index
-from grid_puzzle_localization.tiling.tiler import MIN_TILES_TO_FORK, _TileHeader
+from grid_puzzle_localization.tiling.tile_files import TileFileWriter, TileHeader
+from grid_puzzle_localization.tiling.tiler import MIN_TILES_TO_FORK
 
 FIELDS = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<u1"), ("t", "<f8"), ("n", "<f4", (2,))])
 
@@ -290,31 +292,49 @@ def test_many_tiles_with_parallel_writers_bit_for_bit(tmp_path, jobs, memory_mb)
     )
 
 
+@pytest.fixture
+def file_size_limit():
+    """Sets RLIMIT_FSIZE for this process and the writers it forks (writes past it fail with EFBIG, as
+    on a full disk), and restores it afterwards."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    previous = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # else the kernel kills the writer
+    yield lambda limit: resource.setrlimit(resource.RLIMIT_FSIZE, (limit, hard))
+    resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+    signal.signal(signal.SIGXFSZ, previous)
+
+
 @pytest.mark.parametrize("jobs", [1, 2])
 @pytest.mark.parametrize("existing", [False, True])
-def test_failure_mid_write_leaves_nothing_behind(tmp_path, monkeypatch, jobs, existing):
+def test_failure_mid_write_leaves_nothing_behind(tmp_path, file_size_limit, jobs, existing):
+    cloud = wide_cloud(20_000, 0.5, cells=60, seed=12)
+    big = np.repeat(cloud[:1], 150_000)  # one tile of 4.35 MB, past the limit below; the others are small
     src = tmp_path / "map.pcd"
-    write_pcd(src, wide_cloud(20_000, 0.5, cells=60, seed=12))
+    write_pcd(src, np.concatenate([cloud, big]))
     out = tmp_path / "tiles"
     if existing:  # an earlier output that --force would replace: it must survive the failure intact
         out.mkdir()
         (out / "old.pcd").write_text("old tiles")
-    writev = os.writev
-    calls = 0
-
-    def disk_full_after_500_tiles(fd, buffers):  # inherited by the forked writers
-        nonlocal calls
-        calls += 1
-        if calls > 500:
-            raise OSError(errno.ENOSPC, "No space left on device")
-        return writev(fd, buffers)
-
-    monkeypatch.setattr(os, "writev", disk_full_after_500_tiles)
-    with pytest.raises(OSError, match="No space left" if jobs == 1 else "tile writer process failed"):
+    file_size_limit(4 * 2**20)
+    with pytest.raises(OSError, match="File too large" if jobs == 1 else "tile writer process failed"):
         tile_map([src], out, TileConfig(grid_size=0.5, jobs=jobs, force=True, progress=False))
     assert sorted(p.name for p in tmp_path.iterdir()) == (["map.pcd", "tiles"] if existing else ["map.pcd"])
     if existing:
         assert [p.name for p in out.iterdir()] == ["old.pcd"] and (out / "old.pcd").read_text() == "old tiles"
+
+
+def test_tile_writer_error_names_the_file(tmp_path):
+    out = tmp_path / "tiles"
+    out.mkdir()
+    writer = TileFileWriter(tiles_with_counts([3, 5]), TileHeader.like(fields_header(tmp_path)), out)
+    (out / "b.pcd").write_text("taken")
+    dir_fd = os.open(out, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        with pytest.raises(FileExistsError) as error:
+            writer.write(dir_fd, range(2), ["a.pcd", "b.pcd"])
+    finally:
+        os.close(dir_fd)
+    assert error.value.filename == str(out / "b.pcd")
+    assert (out / "b.pcd").read_text() == "taken" and (out / "a.pcd").stat().st_size > 0
 
 
 def test_index_text_is_what_json_would_write(tmp_path):
@@ -430,14 +450,37 @@ def test_write_all_finishes_a_partial_writev(tmp_path, monkeypatch):
     assert (tmp_path / "out2").read_bytes() == expected * 700
 
 
+def fields_header(directory: Path) -> PcdHeader:
+    """The header of a PCD file with FIELDS."""
+    path = directory / "fields.pcd"
+    write_pcd(path, random_cloud(1, 1.0, seed=13))
+    return read_pcd_header(path)
+
+
+def tiles_with_counts(counts: list[int]) -> TileSet:
+    """A TileSet whose tiles declare ``counts`` points but have no points buffered."""
+    stats = np.zeros(len(counts), dtype=GROUP_DTYPE)
+    stats["count"] = counts
+    none = np.zeros(len(counts), dtype=np.int64)
+    empty = np.zeros(0, dtype=np.int64)
+    return TileSet(stats, [None] * len(counts), none, none, empty, empty, empty, [])
+
+
 def test_tile_header_declares_n_points_and_knows_its_size(tmp_path):
-    src = tmp_path / "map.pcd"
-    write_pcd(src, random_cloud(10, 1.0, seed=13))
-    template = _TileHeader.like(read_pcd_header(src))
     counts = [0, 1, 9, 10, 99, 100, 12_345, 10**12, 10**12 - 1]
-    assert template.sizes(np.array(counts)).tolist() == [len(template.of(n)) for n in counts]
-    for n in counts:
-        text = template.of(n)
+    template = TileHeader.like(fields_header(tmp_path))
+    out = tmp_path / "tiles"
+    out.mkdir()
+    writer = TileFileWriter(tiles_with_counts(counts), template, out)
+    names = [f"{n}.pcd" for n in counts]
+    dir_fd = os.open(out, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        writer.write(dir_fd, range(len(counts)), names)
+    finally:
+        os.close(dir_fd)
+    texts = [(out / name).read_bytes() for name in names]
+    assert template.sizes(np.array(counts)).tolist() == [len(text) for text in texts]
+    for n, text in zip(counts, texts, strict=True):
         parsed = parse_header(text, "tile")
         assert (parsed.points, parsed.width, parsed.height, parsed.data) == (n, n, 1, "binary")
         assert parsed.dtype == FIELDS and parsed.header_bytes == len(text)

@@ -1,8 +1,8 @@
 """Grouping a chunk of points by tile: a stable sort by tile (i, j) = (floor(x / s), floor(y / s)),
 computed in float64 (as grid.tile_index), and one row per tile with its point range and bounds.
 
-The sort runs in the package's C++ library (src/core/tile_grouping.cpp, loaded with ctypes, which
-releases the GIL, so that chunks are grouped on several threads at once): one counting sort over the
+The sort runs in the package's C++ library (native.py: src/core/tile_grouping.cpp, without the GIL,
+so that chunks are grouped on several threads at once): one counting sort over the
 chunk's tiles does what took a dozen numpy passes and their temporaries, three times as fast.
 
 Stability matters: points keep their input order inside a tile, so the output is deterministic and
@@ -11,12 +11,10 @@ a tile read back equals the input points of that cell, in order.
 
 from __future__ import annotations
 
-import ctypes
-import functools
-
 import numpy as np
 
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.tiling import native
 
 # One row per (tile, chunk): where the tile's points sit in the sorted chunk, how many there are,
 # and their x, y, z bounds [m]. The layout of GpmTileGroup in tile_grouping.hpp.
@@ -31,36 +29,8 @@ GROUP_DTYPE = np.dtype(
         ("max", "<f8", (3,)),
     ]
 )
-LIBRARY = "libgrid_puzzle_localization_tiling.so"
-_FIELD_TYPES = {
-    "f4": 0,
-    "f8": 1,
-    "i1": 2,
-    "i2": 3,
-    "i4": 4,
-    "i8": 5,
-    "u1": 6,
-    "u2": 7,
-    "u4": 8,
-    "u8": 9,
-}  # GpmFieldType
-
-
-@functools.cache
-def _group_by_tile() -> ctypes._CFuncPtr:
-    """gpm_group_by_tile of the package's library, found on LD_LIBRARY_PATH (the setup files add it)."""
-    try:
-        library = ctypes.CDLL(LIBRARY)
-    except OSError as err:
-        raise UserError(
-            f"cannot load {LIBRARY} ({err}); build the package (make build) and source its setup file"
-            " (source build/setup.bash, or the install space's setup.bash)"
-        ) from None
-    function = library.gpm_group_by_tile
-    function.restype = ctypes.c_int64
-    pointer, int64 = ctypes.c_void_p, ctypes.c_int64
-    function.argtypes = [pointer, int64, int64, pointer, pointer, ctypes.c_double, pointer, pointer, pointer]
-    return function
+# GpmFieldType in tile_grouping.hpp
+_FIELD_TYPES = {"f4": 0, "f8": 1, "i1": 2, "i2": 3, "i4": 4, "i8": 5, "u1": 6, "u2": 7, "u4": 8, "u8": 9}
 
 
 def group_chunk(records: np.ndarray, s: float, chunk: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -74,7 +44,7 @@ def group_chunk(records: np.ndarray, s: float, chunk: int = 0) -> tuple[np.ndarr
     sorted_records = np.empty_like(records)
     rows = np.empty(n, dtype=GROUP_DTYPE)  # room for a tile per point; only the rows written are touched
     scratch = np.empty(2 * n, dtype=np.int64)
-    tiles = _group_by_tile()(
+    tiles = native.library().gpm_group_by_tile(
         records.ctypes.data,
         n,
         records.dtype.itemsize,

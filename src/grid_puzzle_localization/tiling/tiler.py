@@ -15,7 +15,6 @@ proportional to the map's area, not its point count)."""
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import os
 import sys
@@ -24,24 +23,22 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from grid_puzzle_localization.atomic import atomic_directory, check_output_dir, sync_filesystem
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.grid import check_grid_size, tile_filename
 from grid_puzzle_localization.pcd import PcdChunks, PcdHeader, iter_pcd_chunks, read_pcd_header
 from grid_puzzle_localization.pcd.reader import check_xyz
-from grid_puzzle_localization.tiling.buffer import TileBuffer, TileSet, write_all
+from grid_puzzle_localization.tiling.buffer import TileBuffer, TileSet
 from grid_puzzle_localization.tiling.grouping import group_chunk
 from grid_puzzle_localization.tiling.index import TileIndex, TileTable, write_autoware_metadata, write_index
 from grid_puzzle_localization.tiling.parallel import SharedBatches, in_background, map_ahead
+from grid_puzzle_localization.tiling.tile_files import TileFileWriter, TileHeader
 
 MIN_MEMORY_MB = 1.0
 _CHUNK_SHARE = 0.30
 _BUFFER_SHARE = 0.55
 _CHUNK_OVERHEAD_BYTES = 128  # per point while grouping a chunk: keys, counts and up to a group row each
 MIN_TILES_TO_FORK = 2000  # below this a fork costs more than it saves
-_POWERS_OF_TEN = 10 ** np.arange(19, dtype=np.int64)
 
 
 @dataclass
@@ -100,13 +97,14 @@ def tile_map(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, co
         read = _stream(paths, headers, buffer, s, chunk_points, jobs, show)
         streamed = time.perf_counter()
         tiles = buffer.finish()
-        header = _TileHeader.like(headers[0])
+        header = TileHeader.like(headers[0])
+        writer = TileFileWriter(tiles, header, tmp)
         fork = jobs > 1 and len(tiles) >= MIN_TILES_TO_FORK
         writers = jobs if fork else 1
         flush = functools.partial(_flush_written, tmp) if config.sync else None
         with SharedBatches(len(tiles)) as batches:
             writer_jobs = [
-                functools.partial(_write_tile_files, tiles, s, header, tmp, batches, show and k == 0, writers)
+                functools.partial(_write_tile_files, tiles, s, writer, batches, show and k == 0, writers)
                 for k in range(writers)
             ]
             with in_background(writer_jobs, fork=fork, while_waiting=flush):
@@ -145,67 +143,25 @@ def _stream(
     return read
 
 
-@dataclass(frozen=True)
-class _TileHeader:
-    """Binary PCD header of a tile of n points with the input's fields: fixed text around n, which
-    appears twice (WIDTH and POINTS). Each tile's header is formatted once, by its writer."""
-
-    before_width: str
-    before_points: str
-    after_points: str
-
-    @classmethod
-    def like(cls, header: PcdHeader) -> _TileHeader:
-        empty = dataclasses.replace(header, data="binary", width=0, height=1, points=0).text()
-        head, rest = empty.split("\nWIDTH 0\n")
-        middle, tail = rest.split("\nPOINTS 0\n")
-        return cls(f"{head}\nWIDTH ", f"\n{middle}\nPOINTS ", f"\n{tail}")
-
-    def of(self, n: int) -> bytes:
-        return f"{self.before_width}{n}{self.before_points}{n}{self.after_points}".encode()  # ASCII
-
-    def sizes(self, counts: np.ndarray) -> np.ndarray:
-        """len(self.of(n)) for each n in ``counts``, without formatting them."""
-        digits = np.searchsorted(_POWERS_OF_TEN, np.maximum(counts, 1), side="right")
-        return len(self.before_width) + len(self.before_points) + len(self.after_points) + 2 * digits
-
-
 def _write_tile_files(
     tiles: TileSet,
     s: float,
-    header: _TileHeader,
-    directory: Path,
+    writer: TileFileWriter,
     batches: SharedBatches,
     show: bool,
     writers: int,
 ) -> None:
-    """Creates the tile files of the batches it takes in ``directory`` (itself atomic, so files are
-    written in place): one open, one writev and one close each when the tile did not spill."""
-    dir_fd = os.open(directory, os.O_RDONLY | os.O_DIRECTORY)  # names resolve relative to it: no path work
+    """Creates the tile files of the batches it takes (in a directory that is itself atomic, so files
+    are written in place)."""
+    dir_fd = os.open(writer.directory, os.O_RDONLY | os.O_DIRECTORY)  # names resolve relative to it
     try:
         share = len(tiles) // writers  # about what each writer takes
         with _progress(show, total=share, desc=f"writing tiles (writer 1 of {writers})", unit="tile") as bar:
             for which in batches:
-                counts = tiles.stats["count"][which.start : which.stop].tolist()
-                batch = zip(_tile_names(tiles, s, which), counts, which, tiles.parts(which), strict=True)
-                for name, count, t, parts in batch:
-                    _write_tile_file(dir_fd, name, header.of(count), tiles.spills[t], parts)
+                writer.write(dir_fd, which, _tile_names(tiles, s, which))
                 bar.update(len(which))
     finally:
         os.close(dir_fd)
-
-
-def _write_tile_file(dir_fd: int, name: str, head: bytes, spill: Path | None, parts: list[np.ndarray]) -> None:
-    fd = os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644, dir_fd=dir_fd)
-    try:
-        if spill is not None:
-            write_all(fd, [head])
-            _append_file(fd, spill)
-            write_all(fd, parts)
-        else:
-            write_all(fd, [head, *parts])
-    finally:
-        os.close(fd)
 
 
 def _tile_names(tiles: TileSet, s: float, which: range) -> list[str]:
@@ -220,23 +176,13 @@ def _flush_written(directory: Path) -> None:
     sync_filesystem(directory)
 
 
-def _append_file(fd: int, path: Path) -> None:
-    """Copies the file ``path`` to ``fd`` in the kernel, then deletes it."""
-    with open(path, "rb") as src:
-        size = os.fstat(src.fileno()).st_size
-        offset = 0
-        while offset < size:
-            offset += os.sendfile(fd, src.fileno(), offset, size - offset)
-    os.unlink(path)
-
-
 def _tile_index(
     s: float,
     header: PcdHeader,
     read: list[tuple[Path, PcdChunks]],
     tiles: TileSet,
     names: list[str],
-    tile_header: _TileHeader,
+    tile_header: TileHeader,
 ) -> TileIndex:
     record = header.record_bytes
     stats = tiles.stats
