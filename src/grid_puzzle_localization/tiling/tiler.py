@@ -1,12 +1,12 @@
 """Cutting a global point-cloud map into grid puzzle tiles (the paper's Algorithm 1), streaming.
 
-Input PCDs are read chunk by chunk; each chunk is sorted by tile (grouping.py) on one of ``jobs``
-threads while the next is read (parallel.map_ahead) and buffered; when the buffer passes its share
-of the memory budget it is spilled to per-tile files (buffer.py). At the end every tile is written
-once as a binary PCD with the input's fields and types (one open, writev and close per tile, by
-``jobs`` forked writers taking batches of tiles from a shared queue), while this process writes
-``index.json`` and Autoware's ``pointcloud_map_metadata.yaml`` (index.py) and then flushes what the
-writers have written so far, again and again until they finish. All of it goes into a temporary
+Input PCDs are read chunk by chunk; each chunk is sorted by tile (grouping.py, in C++) on one of
+``jobs`` threads while the next is read (parallel.map_ahead) and buffered; when the buffer passes its
+share of the memory budget it is spilled to per-tile files (buffer.py). At the end every tile is
+written once as a binary PCD with the input's fields and types (tile_files.py: one open, writev and
+close per tile in C++, by ``jobs`` forked writers taking batches of tiles from a shared queue), while
+this process writes ``index.json`` and Autoware's ``pointcloud_map_metadata.yaml`` (index.py) and then
+flushes what the writers have written so far, again and again until they finish. All of it goes into a temporary
 directory that is flushed to disk with a last syncfs and then replaces OUT_DIR (atomic.atomic_directory).
 
 Memory: ``memory_mb`` bounds the working set: about 30 % for decoding and sorting the chunks in
