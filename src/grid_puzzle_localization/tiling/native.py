@@ -1,6 +1,6 @@
-"""The tiler's C++ library, ``libgrid_puzzle_localization_tiling.so`` (src/core/tile_grouping.cpp and
-tile_writing.cpp), loaded with ctypes from the library path that the package's setup files set. Its
-loops run without the GIL, so threads and forked writers run them side by side."""
+"""The tiler's C++ library, ``libgrid_puzzle_localization_tiling.so`` (src/core/tile_grouping.cpp,
+tile_writing.cpp and tile_index_json.cpp), loaded with ctypes from the library path that the package's
+setup files set. Its loops run without the GIL, so threads and forked writers run them side by side."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from grid_puzzle_localization.errors import UserError
 
 LIBRARY = "libgrid_puzzle_localization_tiling.so"
 _POINTER, _INT64 = ctypes.c_void_p, ctypes.c_int64
+Xyz = _POINTER * 3  # addresses of x, y and z columns
 
 
 class TileHeaderStruct(ctypes.Structure):
@@ -23,6 +24,20 @@ class TileRowsStruct(ctypes.Structure):
     """GpmTileRows (tile_writing.hpp): addresses of int64 arrays and of the chunk address array."""
 
     _fields_ = [(name, _POINTER) for name in ("begin", "end", "chunk", "first", "last", "chunks")]
+
+
+class TileColumnsStruct(ctypes.Structure):
+    """GpmTileColumns (tile_index_json.hpp)."""
+
+    _fields_ = [
+        ("i", _POINTER),
+        ("j", _POINTER),
+        ("files", ctypes.c_char_p),
+        ("points", _POINTER),
+        ("bytes", _POINTER),
+        ("lower", Xyz),
+        ("upper", Xyz),
+    ]
 
 
 @functools.cache
@@ -49,4 +64,6 @@ def library() -> ctypes.CDLL:
         ctypes.POINTER(_INT64),
         ctypes.POINTER(ctypes.c_char_p),
     ]
+    lib.gpm_tiles_json.restype = _INT64
+    lib.gpm_tiles_json.argtypes = [_INT64, ctypes.POINTER(TileColumnsStruct), ctypes.c_double, _INT64, _POINTER, _INT64]
     return lib
