@@ -30,7 +30,7 @@ def read_tile(path: str | os.PathLike, xyz_only: bool = True) -> np.ndarray:
         check_binary_size(header, len(raw) - header.header_bytes, path)
         records = np.frombuffer(raw, dtype=header.dtype, count=header.points, offset=header.header_bytes)
         finite = finite_xyz(records)
-        if not finite.all():
+        if finite is not None:
             records = records[finite]
     else:
         records = read_pcd(path).points  # finite x, y, z already

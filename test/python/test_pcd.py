@@ -92,6 +92,17 @@ def test_nonfinite_xyz_dropped_and_counted(tmp_path, encoding):
     assert_same(back.points, cloud[~bad], bitwise=encoding != "ascii")
 
 
+def test_huge_finite_coordinates_are_kept(tmp_path):
+    """Coordinates whose sum overflows to inf are still finite points (the all-finite shortcut sums)."""
+    cloud = np.zeros(4, dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
+    cloud["x"] = [3e38, 3e38, -3e38, 1.0]
+    cloud["z"][3] = np.nan
+    path = tmp_path / "huge.pcd"
+    write_pcd(path, cloud)
+    back = read_pcd(path)
+    assert back.nonfinite_dropped == 1 and back.points.tobytes() == cloud[:3].tobytes()
+
+
 def test_chunks_stream_in_order_and_count_drops(tmp_path):
     cloud = random_cloud(10_007, seed=2)
     cloud["z"][::1000] = np.nan
