@@ -27,9 +27,8 @@ struct GpmTileRows {
 /// Creates `tiles` new files in the directory `dir_fd`. Tile k is named by the k-th NUL-terminated
 /// string of `names` and holds the header for counts[k] points, then its spill file (the k-th
 /// NUL-terminated string of `spills`, empty for none; deleted once copied), then its rows. Returns 0,
-/// or the errno of the first failure, with *failed set to that tile and *failed_path to the file it
-/// concerns (the tile file, or its spill file); the files before it are complete.
+/// or the errno of the first failure, with *failed_path set to the file it concerns (the tile file, or
+/// its spill file); the files before it are complete.
 int gpm_write_tiles(int dir_fd, std::int64_t tiles, const char* names, const char* spills, const std::int64_t* counts,
-                    const GpmTileHeader* header, const GpmTileRows* rows, std::int64_t* failed,
-                    const char** failed_path);
+                    const GpmTileHeader* header, const GpmTileRows* rows, const char** failed_path);
 }

