@@ -33,8 +33,7 @@ from grid_puzzle_localization.blocks.select import BlockSelector
 from grid_puzzle_localization.blocks.storage import storage_table
 from grid_puzzle_localization.blocks.store import read_block_index, write_block_dir
 from grid_puzzle_localization.cli import main as gpm
-from grid_puzzle_localization.pcd import iter_pcd_chunks, read_pcd_header, write_pcd, xyz_array
-from grid_puzzle_localization.pcd.reader import XYZ_DTYPE
+from grid_puzzle_localization.pcd import iter_pcd_chunks, read_pcd_header, write_pcd, xyz_array, xyz_records
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real" / "nova_utd_tiles"
 TILE = 25.0  # [m] side of the data set's tiles
@@ -106,9 +105,7 @@ def main() -> None:
     points, tile_files = load_map()
     with tempfile.TemporaryDirectory(prefix="gpm_bench_blocks_") as tmp:
         tmp = Path(tmp)
-        record = np.empty(len(points), dtype=XYZ_DTYPE)
-        record["x"], record["y"], record["z"] = points.T
-        write_pcd(tmp / "map.pcd", record)
+        write_pcd(tmp / "map.pcd", xyz_records(points))
         submap_args = ["submaps", str(tmp / "map.pcd"), str(tmp / "submaps"), "--force"]
         submap_args += ["--side", str(args.side), "--overlap", str(args.overlap)]
         cut_s, _ = median_seconds(lambda: gpm(submap_args), args.repeats)

@@ -13,7 +13,7 @@ import numpy as np
 
 from grid_puzzle_localization.errors import PcdError
 from grid_puzzle_localization.pcd.header import parse_header
-from grid_puzzle_localization.pcd.reader import XYZ, XYZ_DTYPE, check_binary_size, check_xyz, finite_xyz, read_pcd
+from grid_puzzle_localization.pcd.reader import check_binary_size, check_xyz, finite_xyz, read_pcd, xyz_records
 
 
 def read_tile(path: str | os.PathLike, xyz_only: bool = True) -> np.ndarray:
@@ -36,7 +36,4 @@ def read_tile(path: str | os.PathLike, xyz_only: bool = True) -> np.ndarray:
         records = read_pcd(path).points  # finite x, y, z already
     if not xyz_only:
         return records.copy()  # not a view that keeps the whole file buffer alive
-    out = np.empty(len(records), dtype=XYZ_DTYPE)
-    for name in XYZ:
-        out[name] = records[name]
-    return out
+    return xyz_records(records)

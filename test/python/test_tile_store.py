@@ -9,9 +9,9 @@ from tile_truth import brute_force_window_files
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.pcd import read_pcd
+from grid_puzzle_localization.pcd.reader import XYZ_DTYPE
 from grid_puzzle_localization.synthetic_tiles import write_tiles
 from grid_puzzle_localization.tile_directory import open_tile_directory
-from grid_puzzle_localization.tile_reader import XYZ_DTYPE
 from grid_puzzle_localization.tile_store import TileStore
 from grid_puzzle_localization.window import PoseSample, WindowConfig, WindowTracker, compute_window
 

@@ -7,7 +7,7 @@ from collections import OrderedDict
 import numpy as np
 
 from grid_puzzle_localization.blocks.store import BlockIndex
-from grid_puzzle_localization.pcd import read_pcd
+from grid_puzzle_localization.pcd import read_pcd, xyz_records
 from grid_puzzle_localization.pcd.reader import XYZ_DTYPE
 
 
@@ -41,10 +41,7 @@ class BlockCache:
         if position in self._blocks:
             self._blocks.move_to_end(position)
             return self._blocks[position]
-        points = read_pcd(self.index.directory / self.index.blocks[position].file).points
-        records = np.empty(len(points), dtype=XYZ_DTYPE)
-        for name in XYZ_DTYPE.names:
-            records[name] = points[name]
+        records = xyz_records(read_pcd(self.index.directory / self.index.blocks[position].file).points)
         self._blocks[position] = records
         self.loads += 1
         return records

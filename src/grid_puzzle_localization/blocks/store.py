@@ -24,8 +24,7 @@ import yaml
 
 from grid_puzzle_localization.atomic import atomic_directory, check_output_dir
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array
-from grid_puzzle_localization.pcd.reader import XYZ_DTYPE
+from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array, xyz_records
 
 FORMAT = "gpm_block_map"
 VERSION = 1
@@ -62,13 +61,6 @@ class BlockIndex:
         return xyz_array(read_pcd(self.directory / self.blocks[position].file).points)
 
 
-def _to_record(points: np.ndarray) -> np.ndarray:
-    record = np.empty(len(points), dtype=XYZ_DTYPE)
-    for k, name in enumerate("xyz"):
-        record[name] = points[:, k]
-    return record
-
-
 def write_block_dir(
     target: str | os.PathLike,
     blocks: Iterable[tuple[np.ndarray, np.ndarray, dict[str, Any]]],
@@ -85,7 +77,7 @@ def write_block_dir(
     with atomic_directory(target) as tmp:
         for number, (points, centroid, extra) in enumerate(blocks):
             name = f"block_{number:04d}.pcd"
-            record = _to_record(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+            record = xyz_records(np.asarray(points, dtype=np.float64).reshape(-1, 3))
             write_pcd(tmp / name, record, encoding="binary")
             stored = np.stack([record["x"], record["y"], record["z"]], axis=1).astype(np.float64)
             entries.append(

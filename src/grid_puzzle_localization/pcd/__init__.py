@@ -19,6 +19,7 @@ _EXPORTS = {
     "iter_pcd_chunks": "reader",
     "read_pcd": "reader",
     "xyz_array": "reader",
+    "xyz_records": "reader",
     "PcdStreamWriter": "writer",
     "write_pcd": "writer",
 }

@@ -42,6 +42,17 @@ def xyz_array(points: np.ndarray) -> np.ndarray:
     return out
 
 
+def xyz_records(points: np.ndarray) -> np.ndarray:
+    """x, y, z as XYZ_DTYPE records (float32): the fields of a structured point array, or the columns
+    of an (N, 3) array (a view when that is already contiguous float32)."""
+    if points.dtype.names:
+        out = np.empty(len(points), dtype=XYZ_DTYPE)
+        for name in XYZ:
+            out[name] = points[name]
+        return out
+    return np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3).view(XYZ_DTYPE).reshape(-1)
+
+
 def finite_xyz(records: np.ndarray) -> np.ndarray | None:
     """Mask of the records whose x, y and z are all finite, or None when they all are. That common case
     costs one sum per axis: a NaN or inf makes the sum NaN or inf (a sum that overflows only sends it

@@ -16,14 +16,13 @@ from std_msgs.msg import Header
 from tf2_msgs.msg import TFMessage
 
 from grid_puzzle_localization import synthetic_scene as ss
-from grid_puzzle_localization.pcd.reader import XYZ_DTYPE
+from grid_puzzle_localization.pcd.reader import xyz_records
 from grid_puzzle_localization.ros.cloud_msg import array_to_cloud
 
 
 def xyz_cloud(points: np.ndarray, header: Header) -> PointCloud2:
     """A dense x y z float32 PointCloud2 from an ``(N, 3)`` array."""
-    xyz = np.ascontiguousarray(points, dtype=np.float32).reshape(-1, 3)
-    return array_to_cloud(xyz.view(XYZ_DTYPE).reshape(-1), header=header)
+    return array_to_cloud(xyz_records(points), header=header)
 
 
 def _pose_fields(m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
