@@ -36,18 +36,12 @@ class TileSet:
     def __len__(self) -> int:
         return len(self.stats)
 
-    def parts(self, which: range) -> Iterator[list[np.ndarray]]:
-        """For each tile of the consecutive tiles ``which``: its buffered points (after its spill file),
-        as byte slices in input order. Their rows are consecutive too; those columns become plain lists
-        first, so that a tile costs no numpy call."""
-        begin = self.row_begin[which.start : which.stop]
-        end = self.row_end[which.start : which.stop]
-        filled = end > begin
-        low = int(begin[filled].min()) if filled.any() else 0
-        high = int(end[filled].max()) if filled.any() else 0
-        chunk, first, last = (rows[low:high].tolist() for rows in (self.row_chunk, self.row_first, self.row_last))
+    def parts(self) -> Iterator[list[np.ndarray]]:
+        """For each tile: its buffered points (after its spill file), as byte slices in input order. The
+        row columns become plain lists first, so that a tile costs no numpy call."""
+        chunk, first, last = (rows.tolist() for rows in (self.row_chunk, self.row_first, self.row_last))
         chunks = self.chunks
-        for b, e in zip((begin - low).tolist(), (end - low).tolist(), strict=True):
+        for b, e in zip(self.row_begin.tolist(), self.row_end.tolist(), strict=True):
             yield [chunks[chunk[r]][first[r] : last[r]] for r in range(b, e)]
 
 
@@ -78,7 +72,7 @@ class TileBuffer:
         rows, first, last = self._fold()
         buffered = self._tile_set(rows[first], [None] * len(first), first, last, rows)
         keys = zip(buffered.stats["i"].tolist(), buffered.stats["j"].tolist(), strict=True)
-        for (i, j), parts in zip(keys, buffered.parts(range(len(buffered))), strict=True):
+        for (i, j), parts in zip(keys, buffered.parts(), strict=True):
             fd = os.open(self._spill_path(i, j), os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600)
             try:
                 write_all(fd, parts)

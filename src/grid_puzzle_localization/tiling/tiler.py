@@ -6,8 +6,9 @@ share of the memory budget it is spilled to per-tile files (buffer.py). At the e
 written once as a binary PCD with the input's fields and types (tile_files.py: one open, writev and
 close per tile in C++, by ``jobs`` forked writers taking batches of tiles from a shared queue), while
 this process writes ``index.json`` and Autoware's ``pointcloud_map_metadata.yaml`` (index.py) and then
-flushes what the writers have written so far, again and again until they finish. All of it goes into a temporary
-directory that is flushed to disk with a last syncfs and then replaces OUT_DIR (atomic.atomic_directory).
+flushes what the writers have written so far, again and again until they finish. All of it goes into a
+temporary directory that is flushed to disk with a last syncfs and then replaces OUT_DIR
+(atomic.atomic_directory).
 
 Memory: ``memory_mb`` bounds the working set: about 30 % for decoding and sorting the chunks in
 flight, 55 % for buffered points; the rest covers per-tile bookkeeping (about 1 kB per tile, so
@@ -101,7 +102,9 @@ def tile_map(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, co
         writer = TileFileWriter(tiles, header, tmp)
         fork = jobs > 1 and len(tiles) >= MIN_TILES_TO_FORK
         writers = jobs if fork else 1
-        flush = functools.partial(_flush_written, tmp) if config.sync else None
+        # Flushing what the writers have written so far, again and again while they run, overlaps the
+        # writeback with them (on the other core), so the last syncfs has only the last files to do.
+        flush = functools.partial(sync_filesystem, tmp) if config.sync else None
         with SharedBatches(len(tiles)) as batches:
             writer_jobs = [
                 functools.partial(_write_tile_files, tiles, s, writer, batches, show and k == 0, writers)
@@ -168,12 +171,6 @@ def _tile_names(tiles: TileSet, s: float, which: range) -> list[str]:
     """File names of tiles ``which``: each writer names its own tiles, the index names them all."""
     stats = tiles.stats[which.start : which.stop]
     return [tile_filename(i, j, s) for i, j in zip(stats["i"].tolist(), stats["j"].tolist(), strict=True)]
-
-
-def _flush_written(directory: Path) -> None:
-    """Flushes the tiles written so far (called every WAIT_PAUSE_S while the writers run): writeback
-    overlaps the writers (on the other core), and the final syncfs only has the last files to do."""
-    sync_filesystem(directory)
 
 
 def _tile_index(
