@@ -1,4 +1,4 @@
-"""`make bench-localizer`: a synthetic drive (grid_puzzle_localization.synthetic_scene) through the core
+"""`make bench-localizer`: a synthetic drive (fixtures.synthetic_scene) through the core
 localizer without roscore. Writes the scans, the gyro samples and the map to a temporary input file, runs the
 C++ bench_localizer once per map mode (cloud: the merged window rebuilt per change; tiles: incremental deltas)
 and once as the control (repeat: the same scan against a fixed map at every slot, whose spread is the machine's
@@ -14,9 +14,8 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from fixtures import synthetic_scene as ss
 from hardware import cpu_model
-
-from grid_puzzle_localization import synthetic_scene as ss
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -81,8 +81,9 @@ def route_poses(width: float, height: float, speed: float, rate: float) -> np.nd
 
 
 def make_map(directory: Path, width: float, height: float, s: float, points_per_tile: int) -> dict:
-    from grid_puzzle_localization.grid import tile_filename, tile_stem
-    from grid_puzzle_localization.synthetic_tiles import POINT_DTYPE, write_tiles
+    from fixtures.synthetic_tiles import POINT_DTYPE, write_tiles
+
+    from grid_puzzle_localization.tiles.grid import tile_filename, tile_stem
     from grid_puzzle_localization.tiling.index import TileEntry, TileIndex, write_index
 
     ni, nj = math.ceil(width / s), math.ceil(height / s)

@@ -26,7 +26,6 @@ from pathlib import Path
 import numpy as np
 from hardware import cpu_model
 
-from grid_puzzle_localization.malloc_tuning import reuse_large_buffers
 from grid_puzzle_localization.sim import worlds
 from grid_puzzle_localization.sim.lidar import Mount, SweepSimulator
 from grid_puzzle_localization.sim.ordered import ordered_map
@@ -34,6 +33,7 @@ from grid_puzzle_localization.sim.raycast import RayCaster
 from grid_puzzle_localization.sim.scenario import MOUNTS, ScenarioConfig, _rng, generate
 from grid_puzzle_localization.sim.sensors import SENSORS
 from grid_puzzle_localization.sim.trajectory import localization_trajectory
+from grid_puzzle_localization.util.malloc_tuning import reuse_large_buffers
 
 
 def _raycast(threads: int, repeats: int, sweeps: int) -> dict:

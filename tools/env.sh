@@ -7,3 +7,6 @@ gpl_ws="${GPL_WS:-${XDG_CACHE_HOME:-$HOME/.cache}/grid_puzzle_localization/ws-$(
 export GPL_WS="$gpl_ws"
 # catkin's Python tooling must run on Debian's Python (the pyenv python3 cannot see catkin_pkg).
 export PATH="/usr/bin:$PATH"
+# Test fixtures (synthetic scenes, tiles and bags) are not part of the product package: tests, rostests and the
+# quick benchmarks import them as `fixtures` from test/.
+export PYTHONPATH="$gpl_root/test${PYTHONPATH:+:$PYTHONPATH}"

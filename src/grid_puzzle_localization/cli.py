@@ -12,15 +12,15 @@ from grid_puzzle_localization.errors import UserError
 # name -> (module, one-line help). Modules are imported lazily so `gpm tile` does not pay for
 # matplotlib or rospy.
 COMMANDS: dict[str, tuple[str, str]] = {
-    "tile": ("tiling.cli", "cut a global map PCD into grid puzzle tiles (or --verify a tiled map)"),
-    "window": ("window_cli", "print the grid puzzle window (tiles to load) for a position, as JSON"),
-    "simulate": ("simulate", "generate a simulated LiDAR scenario: bag, ground truth, prior map"),
-    "blocks": ("blocks.blocks_command", "build keyframe-stitched block maps (block map paper, Algorithm 1)"),
-    "submaps": ("blocks.submaps_command", "cut a global map into fixed-size overlapping square submaps"),
-    "storage": ("blocks.storage_command", "storage overhead of global map, tiles, blocks and submaps"),
-    "monitor": ("monitor.command", "Sample CPU (percent of one core) and memory of ROS nodes or PIDs."),
-    "experiment": ("experiment.command", "Run the localizer per map mode on a bag, monitor it, and report."),
-    "report": ("report.command", "Rebuild summary.json, report.md and plots of an experiment directory."),
+    "tile": ("commands.tile", "cut a global map PCD into grid puzzle tiles (or --verify a tiled map)"),
+    "window": ("commands.window", "print the grid puzzle window (tiles to load) for a position, as JSON"),
+    "simulate": ("commands.simulate", "generate a simulated LiDAR scenario: bag, ground truth, prior map"),
+    "blocks": ("commands.blocks", "build keyframe-stitched block maps (block map paper, Algorithm 1)"),
+    "submaps": ("commands.submaps", "cut a global map into fixed-size overlapping square submaps"),
+    "storage": ("commands.storage", "storage overhead of global map, tiles, blocks and submaps"),
+    "monitor": ("commands.monitor", "Sample CPU (percent of one core) and memory of ROS nodes or PIDs."),
+    "experiment": ("commands.experiment", "Run the localizer per map mode on a bag, monitor it, and report."),
+    "report": ("commands.report", "Rebuild summary.json, report.md and plots of an experiment directory."),
 }
 
 

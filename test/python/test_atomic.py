@@ -3,8 +3,8 @@ disk before the rename that publishes them, and the rename itself after it."""
 
 import pytest
 
-from grid_puzzle_localization import atomic
-from grid_puzzle_localization.atomic import atomic_directory, sync_filesystem
+from grid_puzzle_localization.util import atomic
+from grid_puzzle_localization.util.atomic import atomic_directory, sync_filesystem
 
 
 def test_durable_directory_is_flushed_before_it_is_published(tmp_path, monkeypatch):

@@ -16,7 +16,7 @@ from tf2_msgs.msg import TFMessage
 from grid_puzzle_localization.blocks.store import read_block_index
 from grid_puzzle_localization.cli import main
 from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array
-from grid_puzzle_localization.ros.cloud_msg import array_to_cloud
+from grid_puzzle_localization.ros.msgs.cloud import array_to_cloud
 
 RADIUS = 6.05  # [m] a scan sees the world points within this planar distance of the robot
 EXTRINSIC = (0.5, 0.0, 1.2, 0.0, 0.0, np.sin(np.pi / 4), np.cos(np.pi / 4))  # sensor 90 deg yawed, raised

@@ -6,7 +6,7 @@ from sensor_msgs import point_cloud2
 from sensor_msgs.msg import PointCloud2, PointField
 from std_msgs.msg import Header
 
-from grid_puzzle_localization.ros.cloud_msg import array_to_cloud, cloud_from_parts, cloud_to_array
+from grid_puzzle_localization.ros.msgs.cloud import array_to_cloud, cloud_from_parts, cloud_to_array
 
 MIXED = np.dtype(
     [

@@ -3,8 +3,8 @@
 import pytest
 
 from grid_puzzle_localization.cli import build_parser, main
+from grid_puzzle_localization.commands.experiment import config_from_args
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.experiment.command import config_from_args
 from grid_puzzle_localization.experiment.scenario import read_scenario
 
 

@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.grid import (
+from grid_puzzle_localization.tiles.grid import (
     check_grid_size,
     parse_tile_stem,
     tile_center,

@@ -8,7 +8,7 @@ import sys
 
 PROGRAM = """
 import numpy as np
-from grid_puzzle_localization.malloc_tuning import pin_mmap_threshold
+from grid_puzzle_localization.util.malloc_tuning import pin_mmap_threshold
 
 def rss_kib():
     with open("/proc/self/status") as f:
@@ -33,7 +33,7 @@ REUSE_PROGRAM = """
 import resource
 import sys
 import numpy as np
-from grid_puzzle_localization.malloc_tuning import reuse_large_buffers
+from grid_puzzle_localization.util.malloc_tuning import reuse_large_buffers
 
 if sys.argv[1] == "tuned":
     assert reuse_large_buffers()
@@ -61,7 +61,7 @@ def test_reused_large_buffers_do_not_fault_pages_in_again():
 
 
 TRIM_PROGRAM = """
-from grid_puzzle_localization.malloc_tuning import limit_arenas, pin_mmap_threshold, trim_heap
+from grid_puzzle_localization.util.malloc_tuning import limit_arenas, pin_mmap_threshold, trim_heap
 
 def rss_kib():
     with open("/proc/self/status") as f:

@@ -6,7 +6,7 @@ import pytest
 import yaml
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.provider_config import ProviderConfig, load_config, parameter_defaults
+from grid_puzzle_localization.provider.config import ProviderConfig, load_config, parameter_defaults
 
 YAML = Path(__file__).resolve().parents[2] / "config" / "grid_puzzle_map_provider.yaml"
 

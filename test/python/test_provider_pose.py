@@ -6,7 +6,7 @@ import pytest
 import rospy
 from geometry_msgs.msg import Pose, Quaternion, Twist
 
-from grid_puzzle_localization.ros.provider_msgs import pose_sample, yaw_of
+from grid_puzzle_localization.ros.msgs.provider import pose_sample, yaw_of
 
 
 @pytest.mark.parametrize("yaw", [0.0, 0.3, math.pi / 2, 2.5, -2.5, -math.pi / 2])

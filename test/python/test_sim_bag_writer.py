@@ -8,8 +8,8 @@ import rospy
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import Imu, PointCloud2
 
-from grid_puzzle_localization.ros.bag_writer import BagNames, ScenarioBag
-from grid_puzzle_localization.ros.cloud_msg import array_to_cloud
+from grid_puzzle_localization.ros.bags.writer import BagNames, ScenarioBag
+from grid_puzzle_localization.ros.msgs.cloud import array_to_cloud
 from grid_puzzle_localization.sim.lidar import POINT_DTYPE
 
 NAMES = BagNames(points_topic="scan", imu_topic="imu/data", map_frame="world", base_frame="body", lidar_frame="velo")

@@ -10,8 +10,8 @@ from rospy.msg import serialize_message
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
-from grid_puzzle_localization.ros.cloud_msg import array_to_cloud, cloud_from_parts, cloud_to_array
-from grid_puzzle_localization.ros.streamed_msgs import StreamedCloud, StreamedTileDelta
+from grid_puzzle_localization.ros.msgs.cloud import array_to_cloud, cloud_from_parts, cloud_to_array
+from grid_puzzle_localization.ros.msgs.streamed import StreamedCloud, StreamedTileDelta
 
 XYZI = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4")])
 MIXED = np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("ring", "<u2"), ("normal", "<f4", (3,))])

@@ -1,8 +1,7 @@
 """The synthetic scene's ray caster and map sampler against hand-computed geometry."""
 
 import numpy as np
-
-from grid_puzzle_localization import synthetic_scene as ss
+from fixtures import synthetic_scene as ss
 
 
 def small_scene() -> ss.Scene:

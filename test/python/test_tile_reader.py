@@ -6,7 +6,7 @@ import pytest
 from grid_puzzle_localization.errors import PcdError
 from grid_puzzle_localization.pcd import read_pcd, write_pcd
 from grid_puzzle_localization.pcd.reader import XYZ_DTYPE
-from grid_puzzle_localization.tile_reader import read_tile
+from grid_puzzle_localization.tiles.reader import read_tile
 
 XYZI = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4")])
 WIDE = np.dtype([("intensity", "<u2"), ("z", "<f8"), ("x", "<f8"), ("y", "<f8"), ("normal", "<f4", (3,))])

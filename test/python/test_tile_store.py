@@ -5,15 +5,15 @@ import math
 
 import numpy as np
 import pytest
+from fixtures.synthetic_tiles import write_tiles
 from tile_truth import brute_force_window_files
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.pcd import read_pcd
 from grid_puzzle_localization.pcd.reader import XYZ_DTYPE
-from grid_puzzle_localization.synthetic_tiles import write_tiles
-from grid_puzzle_localization.tile_directory import open_tile_directory
-from grid_puzzle_localization.tile_store import TileStore
-from grid_puzzle_localization.window import PoseSample, WindowConfig, WindowTracker, compute_window
+from grid_puzzle_localization.provider.tile_store import TileStore
+from grid_puzzle_localization.provider.window import PoseSample, WindowConfig, WindowTracker, compute_window
+from grid_puzzle_localization.tiles.directory import open_tile_directory
 
 S = 2.0
 
@@ -223,8 +223,9 @@ def test_off_map_window_is_empty_and_recovers(holey_map):
 @pytest.fixture(scope="module")
 def tiled_by_tiler(tmp_path_factory):
     """A map cut by the real tiler (index.json present)."""
+    from fixtures.synthetic_tiles import POINT_DTYPE
+
     from grid_puzzle_localization.pcd import write_pcd
-    from grid_puzzle_localization.synthetic_tiles import POINT_DTYPE
     from grid_puzzle_localization.tiling import TileConfig, tile_map
 
     root = tmp_path_factory.mktemp("tiler")
@@ -253,7 +254,7 @@ def test_index_gives_the_same_tiles_as_the_tiler_loader_and_the_listing(tiled_by
 
 @pytest.mark.parametrize("chunk_bytes", [7, 64, 301, 4096, 1 << 20])
 def test_streamed_index_keys_match_the_tiler_loader_across_chunk_boundaries(tiled_by_tiler, chunk_bytes):
-    from grid_puzzle_localization.tile_directory import read_index_keys
+    from grid_puzzle_localization.tiles.directory import read_index_keys
     from grid_puzzle_localization.tiling import load_tile_index
 
     s, keys = read_index_keys(tiled_by_tiler / "index.json", chunk_bytes)
@@ -307,7 +308,7 @@ def test_turn_into_a_neighbouring_sector_is_served_from_the_prefetch_cache(holey
 
 
 def test_auto_cache_is_bounded_by_a_fraction_of_the_loaded_window(tmp_path):
-    from grid_puzzle_localization.tile_store import AUTO_CACHE_FRACTION, AUTO_CACHE_MIN_BYTES
+    from grid_puzzle_localization.provider.tile_store import AUTO_CACHE_FRACTION, AUTO_CACHE_MIN_BYTES
 
     write_tiles(tmp_path, [(i, j) for i in range(30) for j in range(10)], S, count=8000)  # 96 kB of x y z
     store = TileStore(open_tile_directory(tmp_path, S))

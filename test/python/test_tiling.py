@@ -20,9 +20,9 @@ from hypothesis import strategies as st
 
 from grid_puzzle_localization.cli import main
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.grid import tile_filename
 from grid_puzzle_localization.pcd import PcdHeader, read_pcd, read_pcd_header, write_pcd
 from grid_puzzle_localization.pcd.header import parse_header
+from grid_puzzle_localization.tiles.grid import tile_filename
 from grid_puzzle_localization.tiling import (
     AUTOWARE_METADATA_FILE,
     TileConfig,

@@ -8,7 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.window import (
+from grid_puzzle_localization.provider.window import (
     NO_SECTOR,
     PoseSample,
     WindowConfig,

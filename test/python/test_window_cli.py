@@ -3,10 +3,10 @@
 import json
 
 import pytest
+from fixtures.synthetic_tiles import write_tiles
 from tile_truth import brute_force_window_files
 
 from grid_puzzle_localization.cli import main
-from grid_puzzle_localization.synthetic_tiles import write_tiles
 
 
 def run_window(capsys, *argv):

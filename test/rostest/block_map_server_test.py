@@ -20,7 +20,7 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import PointCloud2
 
 from grid_puzzle_localization.blocks.store import write_block_dir
-from grid_puzzle_localization.ros.cloud_msg import cloud_to_array
+from grid_puzzle_localization.ros.msgs.cloud import cloud_to_array
 
 NUM_BLOCKS = 2
 TIMEOUT = 20.0  # [s] for any one expected message

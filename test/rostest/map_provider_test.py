@@ -18,15 +18,15 @@ import numpy as np
 import rospkg
 import rospy
 import rostest
+from fixtures.synthetic_tiles import write_tiles
 from grid_puzzle_localization.msg import ProviderStatus, TileDelta
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
 
-from grid_puzzle_localization.grid import parse_tile_stem, tile_filename
 from grid_puzzle_localization.pcd import read_pcd
-from grid_puzzle_localization.ros.cloud_msg import cloud_to_array
-from grid_puzzle_localization.synthetic_tiles import write_tiles
+from grid_puzzle_localization.ros.msgs.cloud import cloud_to_array
+from grid_puzzle_localization.tiles.grid import parse_tile_stem, tile_filename
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "python"))
 from tile_truth import brute_force_window_files

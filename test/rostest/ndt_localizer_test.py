@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 import rospy
 import rostest
+from fixtures import synthetic_scene as ss
+from fixtures.synthetic_bag import write_drive_bag, xyz_cloud
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from grid_puzzle_localization.msg import NdtStatus, TileDelta
 from nav_msgs.msg import Odometry
@@ -22,9 +24,7 @@ from scipy.spatial.transform import Rotation
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger, TriggerResponse
 
-from grid_puzzle_localization import grid
-from grid_puzzle_localization import synthetic_scene as ss
-from grid_puzzle_localization.ros.synthetic_bag import write_drive_bag, xyz_cloud
+from grid_puzzle_localization.tiles import grid
 
 START = 1000.0  # bag time of the first scan [s]
 TILE = 10.0  # tile side [m]

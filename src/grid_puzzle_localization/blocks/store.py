@@ -22,9 +22,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from grid_puzzle_localization.atomic import atomic_directory, check_output_dir
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array, xyz_records
+from grid_puzzle_localization.util.atomic import atomic_directory, check_output_dir
 
 FORMAT = "gpm_block_map"
 VERSION = 1

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from grid_puzzle_localization.atomic import atomic_write
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.util.atomic import atomic_write
 
 
 @dataclass(frozen=True)

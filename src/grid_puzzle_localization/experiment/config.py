@@ -7,7 +7,7 @@ from pathlib import Path
 
 from grid_puzzle_localization.blocks.builder import BlockConfig
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.window import PRESETS as PAPER_WINDOWS
+from grid_puzzle_localization.provider.window import PRESETS as PAPER_WINDOWS
 
 MODES = ("global", "grid_puzzle", "block_map")
 

@@ -83,7 +83,7 @@ def ensure_submaps(global_map: Path, submap_dir: Path, side_m: float) -> Path:
     """Fixed-size overlapping submaps (side ``side_m``, overlap SUBMAP_OVERLAP) of ``global_map``, for
     the storage comparison. Reused while their index matches."""
     from grid_puzzle_localization.blocks.fixed_cut import SubmapConfig
-    from grid_puzzle_localization.blocks.submaps_command import write_submaps
+    from grid_puzzle_localization.commands.submaps import write_submaps
     from grid_puzzle_localization.pcd import read_pcd, xyz_array
 
     config = SubmapConfig(side_m, SUBMAP_OVERLAP).checked()

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from grid_puzzle_localization.atomic import atomic_write
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.util.atomic import atomic_write
 
 # Sampled per process: CPU in percent of one core, memory in bytes.
 METRICS = ("cpu_percent", "rss_bytes", "uss_bytes", "pss_bytes")

@@ -7,7 +7,7 @@ The names below are imported from their submodule on first use (lazy_exports), s
 only reads (the tile provider) does not load the writer, the merger and what they import.
 """
 
-from grid_puzzle_localization.lazy_exports import lazy_exports
+from grid_puzzle_localization.util.lazy_exports import lazy_exports
 
 _EXPORTS = {
     "ENCODINGS": "header",

@@ -15,10 +15,10 @@ from typing import BinaryIO
 import lzf
 import numpy as np
 
-from grid_puzzle_localization.atomic import atomic_write
 from grid_puzzle_localization.errors import PcdError
 from grid_puzzle_localization.pcd.ascii_codec import encode_ascii
 from grid_puzzle_localization.pcd.header import IDENTITY_VIEWPOINT, PcdHeader, header_for
+from grid_puzzle_localization.util.atomic import atomic_write
 
 _ASCII_BATCH = 200_000
 _MAX_POINTS = 10**18  # reserves header room for a point count of up to 19 digits

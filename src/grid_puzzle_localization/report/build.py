@@ -12,7 +12,6 @@ import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from grid_puzzle_localization.atomic import atomic_write
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation.resources import protocol_processes
 from grid_puzzle_localization.evaluation.summary import ModeRun, summarize_experiment
@@ -20,6 +19,7 @@ from grid_puzzle_localization.evaluation.trajectory import read_tum
 from grid_puzzle_localization.monitor.log import Event, read_csv
 from grid_puzzle_localization.report import plots
 from grid_puzzle_localization.report.markdown import render_report
+from grid_puzzle_localization.util.atomic import atomic_write
 
 RUN_FILE = "run.json"
 TRAJECTORY = "trajectory.tum"

@@ -9,11 +9,11 @@ from collections.abc import Mapping, Sequence
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from grid_puzzle_localization.atomic import atomic_write
 from grid_puzzle_localization.evaluation.metrics import interpolated_errors, paired_errors
 from grid_puzzle_localization.evaluation.trajectory import Trajectory
 from grid_puzzle_localization.monitor.log import MonitorLog
 from grid_puzzle_localization.report.markdown import MIB, MODE_TITLES
+from grid_puzzle_localization.util.atomic import atomic_write
 
 COLORS = {"global": "tab:blue", "grid_puzzle": "tab:orange", "block_map": "tab:green"}
 

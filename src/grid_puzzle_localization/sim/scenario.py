@@ -23,7 +23,6 @@ import yaml
 from scipy.spatial.transform import Rotation
 from tqdm import tqdm
 
-from grid_puzzle_localization.atomic import atomic_directory, check_output_dir
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation import trajectory as tum
 from grid_puzzle_localization.pcd import PcdStreamWriter
@@ -36,6 +35,7 @@ from grid_puzzle_localization.sim.raycast import RayCaster
 from grid_puzzle_localization.sim.sensors import DEFAULT_SENSOR, get_sensor
 from grid_puzzle_localization.sim.trajectory import RATE, Trajectory, localization_trajectory, mapping_trajectory
 from grid_puzzle_localization.sim.worlds import check_world, make_world
+from grid_puzzle_localization.util.atomic import atomic_directory, check_output_dir
 
 # base_link -> lidar per platform [m]: a backpack for the courtyard walk, a roof mount for the car.
 MOUNTS = {"courtyard": (0.2, 0.0, 1.3), "urban": (0.3, 0.0, 1.8)}
@@ -123,7 +123,7 @@ def _write_tum(path: Path, t0: float, traj: Trajectory) -> None:
 def _write_bag(
     path: Path, cfg: ScenarioConfig, sim: SweepSimulator, traj: Trajectory, mount: Mount, movers: Movers, show: bool
 ):
-    from grid_puzzle_localization.ros.bag_writer import BagNames, ScenarioBag
+    from grid_puzzle_localization.ros.bags.writer import BagNames, ScenarioBag
 
     sensor, t0 = sim.sensor, cfg.start_time
     imu = simulate_imu(traj, _rng(cfg.seed, 6), cfg.imu_noise)

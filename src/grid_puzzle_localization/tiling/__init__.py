@@ -4,7 +4,7 @@
 The names below are imported from their submodule on first use (lazy_exports), so a process that
 only reads the index (the tile provider) does not load the tiler and its progress bar."""
 
-from grid_puzzle_localization.lazy_exports import lazy_exports
+from grid_puzzle_localization.util.lazy_exports import lazy_exports
 
 _EXPORTS = {
     "AUTOWARE_METADATA_FILE": "index",

@@ -1,7 +1,7 @@
 """Grouping a chunk of points by tile: a stable sort by tile (i, j) = (floor(x / s), floor(y / s)),
 computed in float64 (as grid.tile_index), and one row per tile with its point range and bounds.
 
-The sort runs in the package's C++ library (native.py: src/core/tile_grouping.cpp, without the GIL,
+The sort runs in the package's C++ library (native.py: src/tiling_native/tile_grouping.cpp, without the GIL,
 so that chunks are grouped on several threads at once): one counting sort over the
 chunk's tiles does what took a dozen numpy passes and their temporaries, three times as fast.
 

@@ -41,10 +41,10 @@ from pathlib import Path
 
 import numpy as np
 
-from grid_puzzle_localization.atomic import atomic_write
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.grid import tile_center
+from grid_puzzle_localization.tiles.grid import tile_center
 from grid_puzzle_localization.tiling import native
+from grid_puzzle_localization.util.atomic import atomic_write
 
 INDEX_FILE = "index.json"
 AUTOWARE_METADATA_FILE = "pointcloud_map_metadata.yaml"

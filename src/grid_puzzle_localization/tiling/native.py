@@ -1,4 +1,4 @@
-"""The tiler's C++ library, ``libgrid_puzzle_localization_tiling.so`` (src/core/tile_grouping.cpp,
+"""The tiler's C++ library, ``libgrid_puzzle_localization_tiling.so`` (src/tiling_native/tile_grouping.cpp,
 tile_writing.cpp and tile_index_json.cpp), loaded with ctypes from the library path that the package's
 setup files set. Its loops run without the GIL, so threads and forked writers run them side by side."""
 

@@ -1,5 +1,5 @@
 """Writing the tile files of a TileSet: binary PCDs with the input's fields, one open, writev and
-close per tile in the package's C++ library (native.py: src/core/tile_writing.cpp), so a batch of
+close per tile in the package's C++ library (native.py: src/tiling_native/tile_writing.cpp), so a batch of
 tiles costs a few Python calls instead of a dozen per tile."""
 
 from __future__ import annotations

@@ -24,16 +24,16 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from grid_puzzle_localization.atomic import atomic_directory, check_output_dir, sync_filesystem
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.grid import check_grid_size, tile_filename
 from grid_puzzle_localization.pcd import PcdChunks, PcdHeader, iter_pcd_chunks, read_pcd_header
 from grid_puzzle_localization.pcd.reader import check_xyz
+from grid_puzzle_localization.tiles.grid import check_grid_size, tile_filename
 from grid_puzzle_localization.tiling.buffer import TileBuffer, TileSet
 from grid_puzzle_localization.tiling.grouping import group_chunk
 from grid_puzzle_localization.tiling.index import TileIndex, TileTable, write_autoware_metadata, write_index
 from grid_puzzle_localization.tiling.parallel import SharedBatches, in_background, map_ahead
 from grid_puzzle_localization.tiling.tile_files import TileFileWriter, TileHeader
+from grid_puzzle_localization.util.atomic import atomic_directory, check_output_dir, sync_filesystem
 
 MIN_MEMORY_MB = 1.0
 _CHUNK_SHARE = 0.30

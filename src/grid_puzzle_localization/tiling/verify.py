@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from grid_puzzle_localization.grid import parse_tile_stem, tile_index
 from grid_puzzle_localization.pcd import iter_pcd_chunks, read_pcd_header
+from grid_puzzle_localization.tiles.grid import parse_tile_stem, tile_index
 from grid_puzzle_localization.tiling.index import load_tile_index
 
 _CHUNK = 1 << 18

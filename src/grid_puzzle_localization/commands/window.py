@@ -9,9 +9,9 @@ import math
 import sys
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.grid import check_grid_size, tile_center, tile_filename
-from grid_puzzle_localization.tile_directory import open_tile_directory
-from grid_puzzle_localization.window import PoseSample, WindowConfig, WindowTracker, compute_window
+from grid_puzzle_localization.provider.window import PoseSample, WindowConfig, WindowTracker, compute_window
+from grid_puzzle_localization.tiles.directory import open_tile_directory
+from grid_puzzle_localization.tiles.grid import check_grid_size, tile_center, tile_filename
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

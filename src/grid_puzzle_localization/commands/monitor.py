@@ -9,11 +9,11 @@ import argparse
 import json
 import sys
 
-from grid_puzzle_localization.atomic import atomic_write
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.monitor.log import write_csv
 from grid_puzzle_localization.monitor.sampler import Monitor, Target
 from grid_puzzle_localization.monitor.stats import summarize
+from grid_puzzle_localization.util.atomic import atomic_write
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -24,7 +24,7 @@ from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
 from grid_puzzle_localization.msg import TileDelta
-from grid_puzzle_localization.ros.cloud_msg import byte_order_is_big, check_parts, fields_of
+from grid_puzzle_localization.ros.msgs.cloud import byte_order_is_big, check_parts, fields_of
 
 _U32 = struct.Struct("<I")
 _HEADER = struct.Struct("<3I")  # seq, stamp secs, stamp nsecs

@@ -1,6 +1,6 @@
 // Writing tile files: header and points gathered into one writev per tile (a spilled tile first gets
 // its spill file copied in the kernel).
-#include "grid_puzzle_localization/tile_writing.hpp"
+#include "tile_writing.hpp"
 
 #include <fcntl.h>
 #include <sys/sendfile.h>

@@ -7,7 +7,7 @@ has room, so a U-turn is served from memory) and returns the change. A tile that
 skipped, reported once in the returned delta, and listed in the stats for good. Thread-safe: one lock
 guards all state; files are read outside it.
 
-Memory: tiles are kept compact (x, y, z float32 by default, see tile_reader.py), and the cache is
+Memory: tiles are kept compact (x, y, z float32 by default, see tiles/reader.py), and the cache is
 bounded by ``cache_mb``, by default an eighth of the loaded window (tiles read ahead are worth more
 than tiles left behind: those only fill spare room and are evicted first).
 """
@@ -25,9 +25,9 @@ import numpy as np
 
 from grid_puzzle_localization.errors import PcdError
 from grid_puzzle_localization.pcd.reader import XYZ_DTYPE
-from grid_puzzle_localization.tile_directory import TileDirectory, decode_key
-from grid_puzzle_localization.tile_reader import read_tile
-from grid_puzzle_localization.window import Window
+from grid_puzzle_localization.provider.window import Window
+from grid_puzzle_localization.tiles.directory import TileDirectory, decode_key
+from grid_puzzle_localization.tiles.reader import read_tile
 
 Key = tuple[int, int]  # (i, j); internally tiles are keyed by their int64 code (tile_directory.encode_keys)
 AUTO_CACHE_FRACTION = 0.125  # cache_mb = 0: the cache holds this fraction of the loaded window's bytes

@@ -19,9 +19,9 @@ import warnings
 import rospy
 from sensor_msgs.msg import PointCloud2
 
-from grid_puzzle_localization.ros.provider_msgs import stamped
-from grid_puzzle_localization.ros.streamed_msgs import StreamedCloud
-from grid_puzzle_localization.tile_store import TileStore
+from grid_puzzle_localization.provider.tile_store import TileStore
+from grid_puzzle_localization.ros.msgs.provider import stamped
+from grid_puzzle_localization.ros.msgs.streamed import StreamedCloud
 
 
 class MapCloudPublisher:

@@ -7,9 +7,9 @@ import json
 from pathlib import Path
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.malloc_tuning import reuse_large_buffers
 from grid_puzzle_localization.tiling.tiler import TileConfig, tile_map
 from grid_puzzle_localization.tiling.verify import verify_tiles
+from grid_puzzle_localization.util.malloc_tuning import reuse_large_buffers
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

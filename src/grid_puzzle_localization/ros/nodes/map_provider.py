@@ -2,8 +2,8 @@
 
 Subscribes to ``odom`` (nav_msgs/Odometry; then also to ``initialpose``, which seeds the first window
 before the localizer has a map) or ``pose`` (PoseWithCovarianceStamped), all in the map frame.
-Callbacks only store the latest pose; a worker thread recomputes the window (window.py), updates the
-tile store (tile_store.py) and publishes ``tile_delta`` (TileDelta) and the latched ``~status``, and
+Callbacks only store the latest pose; a worker thread recomputes the window (provider/window.py), updates the
+tile store (provider/tile_store.py) and publishes ``tile_delta`` (TileDelta) and the latched ``~status``, and
 tells the map_cloud publisher (map_cloud_publisher.py, a thread of its own) that the window changed.
 Delta protocol: every broadcast delta increments ``revision`` by one; a new
 subscriber first receives a ``reset`` delta of the whole window carrying the current revision; the
@@ -23,14 +23,14 @@ from nav_msgs.msg import Odometry
 from std_srvs.srv import Trigger, TriggerResponse
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.malloc_tuning import limit_arenas, pin_mmap_threshold, trim_heap
 from grid_puzzle_localization.msg import ProviderStatus, TileDelta
-from grid_puzzle_localization.provider_config import ProviderConfig, load_config
-from grid_puzzle_localization.ros.map_cloud_publisher import MapCloudPublisher
-from grid_puzzle_localization.ros.provider_msgs import pose_sample, provider_status, stamped, tile_delta
-from grid_puzzle_localization.tile_directory import open_tile_directory
-from grid_puzzle_localization.tile_store import StoreDelta, TileStore
-from grid_puzzle_localization.window import PoseSample, Window, WindowTracker
+from grid_puzzle_localization.provider.config import ProviderConfig, load_config
+from grid_puzzle_localization.provider.tile_store import StoreDelta, TileStore
+from grid_puzzle_localization.provider.window import PoseSample, Window, WindowTracker
+from grid_puzzle_localization.ros.msgs.map_cloud_publisher import MapCloudPublisher
+from grid_puzzle_localization.ros.msgs.provider import pose_sample, provider_status, stamped, tile_delta
+from grid_puzzle_localization.tiles.directory import open_tile_directory
+from grid_puzzle_localization.util.malloc_tuning import limit_arenas, pin_mmap_threshold, trim_heap
 
 WARN_PERIOD = 5.0  # [s] throttle of repeated warnings (off the map, wrong frame)
 

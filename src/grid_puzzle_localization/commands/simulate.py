@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 
-from grid_puzzle_localization.malloc_tuning import reuse_large_buffers
 from grid_puzzle_localization.sim.scenario import ScenarioConfig, generate
 from grid_puzzle_localization.sim.sensors import SENSORS
 from grid_puzzle_localization.sim.worlds import WORLDS
+from grid_puzzle_localization.util.malloc_tuning import reuse_large_buffers
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -16,7 +16,7 @@ from grid_puzzle_localization.blocks.keyframes import Scan
 from grid_puzzle_localization.blocks.poses import Trajectory, pose_matrix
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.pcd import xyz_array
-from grid_puzzle_localization.ros.cloud_msg import cloud_to_array
+from grid_puzzle_localization.ros.msgs.cloud import cloud_to_array
 
 
 def _xyz(msg) -> np.ndarray:

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.grid import check_grid_size, parse_tile_stem, tile_filename
+from grid_puzzle_localization.provider.window import Window
+from grid_puzzle_localization.tiles.grid import check_grid_size, parse_tile_stem, tile_filename
 from grid_puzzle_localization.tiling.index import FORMAT, INDEX_FILE, VERSION
-from grid_puzzle_localization.window import Window
 
 
 @dataclass(frozen=True)

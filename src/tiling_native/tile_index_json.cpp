@@ -1,6 +1,6 @@
 // Formatting the tiles array of index.json; floats as Python's repr writes them, so the text is what
 // json.dumps would write.
-#include "grid_puzzle_localization/tile_index_json.hpp"
+#include "tile_index_json.hpp"
 
 #include <algorithm>
 #include <charconv>

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.grid import tile_index
+from grid_puzzle_localization.tiles.grid import tile_index
 
 # Sector boundaries [deg] inside the normalised range [-20, 340); sector m is [_BOUNDS[m], _BOUNDS[m + 1]).
 SECTOR_BOUNDS_DEG: tuple[float, ...] = (-20.0, 20.0, 70.0, 110.0, 160.0, 200.0, 250.0, 290.0, 340.0)

@@ -28,7 +28,7 @@ from grid_puzzle_localization.blocks.server_config import BlockMapServerConfig
 from grid_puzzle_localization.blocks.store import read_block_index
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.msg import BlockMapStatus
-from grid_puzzle_localization.ros.cloud_msg import array_to_cloud
+from grid_puzzle_localization.ros.msgs.cloud import array_to_cloud
 from grid_puzzle_localization.srv import QueryBlocks, QueryBlocksResponse
 
 

@@ -68,7 +68,7 @@ def _scans(args: argparse.Namespace, config: BlockConfig) -> tuple[Iterable[Scan
     if args.bag:
         if not args.trajectory:
             raise UserError("--bag needs --trajectory, a TUM file of the robot poses")
-        from grid_puzzle_localization.ros.bag_scans import BagScans, bag_extrinsic  # rosbag only when needed
+        from grid_puzzle_localization.ros.bags.scans import BagScans, bag_extrinsic  # rosbag only when needed
 
         extrinsic = (
             parse_extrinsic(args.extrinsic) if args.extrinsic else bag_extrinsic(args.bag, args.topic, args.robot_frame)

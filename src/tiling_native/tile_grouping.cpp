@@ -1,6 +1,6 @@
 // Grouping a chunk of PCD records by tile: a counting sort over the chunk's dense range of tiles
 // (a stable index sort when that range is too sparse), then each tile's bounds from its sorted records.
-#include "grid_puzzle_localization/tile_grouping.hpp"
+#include "tile_grouping.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -21,7 +21,7 @@ from sensor_msgs.msg import Imu, PointCloud2
 from std_msgs.msg import Header
 from tf2_msgs.msg import TFMessage
 
-from grid_puzzle_localization.ros.streamed_msgs import StreamedCloud
+from grid_puzzle_localization.ros.msgs.streamed import StreamedCloud
 
 
 @dataclass(frozen=True)

@@ -9,11 +9,11 @@ import numpy as np
 import rospy
 from std_msgs.msg import Header
 
-from grid_puzzle_localization.grid import tile_stem
 from grid_puzzle_localization.msg import ProviderStatus, TileDelta
-from grid_puzzle_localization.ros.streamed_msgs import StreamedTileDelta
-from grid_puzzle_localization.tile_store import StoreStats
-from grid_puzzle_localization.window import PoseSample, Window
+from grid_puzzle_localization.provider.tile_store import StoreStats
+from grid_puzzle_localization.provider.window import PoseSample, Window
+from grid_puzzle_localization.ros.msgs.streamed import StreamedTileDelta
+from grid_puzzle_localization.tiles.grid import tile_stem
 
 Key = tuple[int, int]
 
@@ -45,7 +45,7 @@ def tile_delta(
     added: list[tuple[Key, np.ndarray]],
     removed: list[Key],
 ) -> TileDelta:
-    """A TileDelta whose added clouds are serialised straight from the tile arrays (streamed_msgs.py).
+    """A TileDelta whose added clouds are serialised straight from the tile arrays (msgs/streamed.py).
     The clouds are dense: the tile reader keeps only points with finite x, y, z."""
     i_min, i_max, j_min, j_max = window.bounds
     return StreamedTileDelta(

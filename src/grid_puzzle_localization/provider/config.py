@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.window import WindowConfig
+from grid_puzzle_localization.provider.window import WindowConfig
 
 POSE_SOURCES = ("odom", "pose")
 
