@@ -20,6 +20,7 @@ lint: setup
 	clang-format --dry-run -Werror $(CXX_SOURCES)
 	$(ROOT)/.venv/bin/ruff check $(PY_SOURCES)
 	$(ROOT)/.venv/bin/ruff format --check $(PY_SOURCES)
+	$(ROOT)/.venv/bin/vermin -q --no-tips --violations -t=3.8- $(PY_SOURCES)
 
 format: setup
 	clang-format -i $(CXX_SOURCES)

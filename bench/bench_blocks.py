@@ -15,7 +15,6 @@ Times are medians over --repeats runs (wall clock, one thread). Usage: bench_blo
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import os
 import statistics
@@ -34,6 +33,7 @@ from grid_puzzle_localization.blocks.storage import storage_table
 from grid_puzzle_localization.blocks.store import read_block_index, write_block_dir
 from grid_puzzle_localization.cli import main as gpm
 from grid_puzzle_localization.pcd import iter_pcd_chunks, read_pcd_header, write_pcd, xyz_array, xyz_records
+from grid_puzzle_localization.util.iteration import pairwise
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real" / "nova_utd_tiles"
 TILE = 25.0  # [m] side of the data set's tiles
@@ -68,7 +68,7 @@ def walk(points: np.ndarray) -> np.ndarray:
         route.append(nxt)
     centres = (np.array(route, dtype=float) + 0.5) * TILE
     path = [centres[0]]
-    for a, b in itertools.pairwise(centres):
+    for a, b in pairwise(centres):
         n = max(1, round(float(np.linalg.norm(b - a)) / STEP))
         path += [a + (b - a) * t for t in np.arange(1, n + 1) / n]
     return np.array(path)

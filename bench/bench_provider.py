@@ -15,7 +15,6 @@ published). A bare rospy node (init_node and spin) is measured for reference. Te
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import math
 import os
@@ -36,6 +35,7 @@ from nav_msgs.msg import Odometry
 
 from grid_puzzle_localization.experiment.processes import ManagedProcess, wait_for
 from grid_puzzle_localization.experiment.ros_stack import RosCore
+from grid_puzzle_localization.util.iteration import pairwise
 
 ROOT = Path(__file__).resolve().parent.parent
 NODE_SCRIPT = ROOT / "scripts" / "grid_puzzle_map_provider"
@@ -71,7 +71,7 @@ def route_poses(width: float, height: float, speed: float, rate: float) -> np.nd
     corners = np.array([(fx * width, fy * height) for fx, fy in ROUTE])
     out, t = [], 0.0
     step = speed / rate
-    for a, b in itertools.pairwise(corners):
+    for a, b in pairwise(corners):
         length = float(np.hypot(*(b - a)))
         yaw = math.atan2(*(b - a)[::-1])
         for d in np.arange(0.0, length, step):

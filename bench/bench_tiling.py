@@ -29,6 +29,7 @@ from hardware import cpu_model
 
 from grid_puzzle_localization.pcd import merge_pcds
 from grid_puzzle_localization.tiling import load_tile_index
+from grid_puzzle_localization.util.iteration import exit_code, zip_equal
 
 ROOT = Path(__file__).resolve().parents[1]
 CAMPUS_TILES = ROOT.parent / "shared" / "data" / "real" / "nova_utd_tiles" / "tiles"
@@ -42,7 +43,7 @@ def run_child(args: list[str]) -> tuple[float, float, dict]:
     output = child.stdout.read()
     _, status, usage = os.wait4(child.pid, 0)
     seconds = time.perf_counter() - start
-    code = os.waitstatus_to_exitcode(status)
+    code = exit_code(status)
     if code != 0:
         raise SystemExit(f"bench_tiling: {' '.join(args)} failed with status {code}")
     return seconds, usage.ru_maxrss / 1024.0, json.loads(output)  # ru_maxrss is in KiB on Linux
@@ -81,7 +82,7 @@ def main() -> int:
             rss.append(peak)
             phases.append(summary)
             table = load_tile_index(out).table
-            files = list(zip(table.files, table.bytes, strict=True))
+            files = list(zip_equal(table.files, table.bytes))
             floor.append(create_files(Path(tmp) / f"files_only{k}", files, args.jobs))
         index = load_tile_index(out)
         median = statistics.median(seconds)

@@ -11,6 +11,8 @@ import os
 import time
 from pathlib import Path
 
+from grid_puzzle_localization.util.iteration import exit_code
+
 FLUSH_PAUSE_S = 0.01
 
 
@@ -29,7 +31,7 @@ def create_files(directory: Path, files: list[tuple[str, int]], workers: int) ->
                 done, status = os.waitpid(pid, os.WNOHANG)
                 if done:
                     running.discard(pid)
-                    if os.waitstatus_to_exitcode(status) != 0:
+                    if exit_code(status) != 0:
                         raise OSError(f"file creation worker failed in {directory}")
             if syncfs(dir_fd) != 0:
                 raise OSError(ctypes.get_errno(), "syncfs failed", str(directory))

@@ -3,6 +3,8 @@
 "N passed, N failed, N skipped". Exits 1 when a suite wrote no result file, ran no test, or has a
 failure or error."""
 
+from __future__ import annotations
+
 import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -47,7 +49,7 @@ def main() -> int:
             print(f"check_results: {suite} produced no test results in {results / suite}")
             ok = False
         ok = ok and suite_totals[1] == 0
-        totals = [a + b for a, b in zip(totals, suite_totals, strict=True)]
+        totals = [a + b for a, b in zip(totals, suite_totals)]
     print(f"{totals[0]} passed, {totals[1]} failed, {totals[2]} skipped")
     return 0 if ok else 1
 

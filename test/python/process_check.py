@@ -1,5 +1,7 @@
 """Test helper: which processes still belong to a ROS master (by their ROS_MASTER_URI)."""
 
+from __future__ import annotations
+
 import psutil
 
 

@@ -2,6 +2,8 @@
 trajectory, written as sensor-frame PCDs with a TUM pose file and a non-trivial extrinsic. The blocks
 must hold exactly the world points seen by their keyframes, and the index must describe the files."""
 
+from __future__ import annotations
+
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +19,7 @@ from grid_puzzle_localization.blocks.store import read_block_index
 from grid_puzzle_localization.cli import main
 from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array
 from grid_puzzle_localization.ros.msgs.cloud import array_to_cloud
+from grid_puzzle_localization.util.iteration import zip_equal
 
 RADIUS = 6.05  # [m] a scan sees the world points within this planar distance of the robot
 EXTRINSIC = (0.5, 0.0, 1.2, 0.0, 0.0, np.sin(np.pi / 4), np.cos(np.pi / 4))  # sensor 90 deg yawed, raised
@@ -101,7 +104,7 @@ def test_blocks_hold_the_points_their_keyframes_saw(keyframe_set, tmp_path):
     assert [b.extra["keyframes"] for b in index.blocks] == [len(g) for g in groups]
     points = world()
     covered = np.zeros(len(points), dtype=bool)
-    for entry, group in zip(index.blocks, groups, strict=True):
+    for entry, group in zip_equal(index.blocks, groups):
         mask = np.zeros(len(points), dtype=bool)
         for k in group:
             mask |= seen(points, robot_pose(k))

@@ -1,7 +1,7 @@
 """Block map candidate rules (new / merge / drop) at the exact 0.1 S and 0.5 S boundaries, through the
 KD-tree decision and through the block builder, on layouts whose distances are exact in float64."""
 
-import math
+from __future__ import annotations
 
 import numpy as np
 import pytest
@@ -9,10 +9,11 @@ from scipy.spatial.distance import cdist
 
 from grid_puzzle_localization.blocks.builder import BlockBuilder, BlockConfig
 from grid_puzzle_localization.blocks.rules import Action, decide
+from grid_puzzle_localization.util.iteration import zip_equal
 
 S = 10.0  # 0.1 S == 1.0 and 0.5 S == 5.0 exactly in float64
-ABOVE_1 = math.nextafter(1.0, 2.0)
-ABOVE_5 = math.nextafter(5.0, 6.0)
+ABOVE_1 = np.nextafter(1.0, 2.0)
+ABOVE_5 = np.nextafter(5.0, 6.0)
 STORED = np.array([[0.0, 0.0, 0.0], [100.0, 0.0, 0.0]])
 
 
@@ -72,7 +73,7 @@ def test_builder_applies_the_rules_in_order():
         (1.0, 0.0, 0.0),  # 0.1 S from #0: dropped
         (103.0, -4.0, 0.0),  # 0.5 S from #2: merged, #2 centroid -> (101.5, -2, 0)
         (200.0, 0.0, 0.0),  # new (#3)
-        (math.nextafter(205.0, 206.0), 0.0, 0.0),  # just above 0.5 S from #3: new (#4)
+        (np.nextafter(205.0, 206.0), 0.0, 0.0),  # just above 0.5 S from #3: new (#4)
         (200.0, 0.0, ABOVE_1),  # just above 0.1 S from #3: merged
     ]
     for k, point in enumerate(candidates):
@@ -83,10 +84,10 @@ def test_builder_applies_the_rules_in_order():
         [(3.0, 4.0, 0.0)],
         [(100.0, 0.0, 0.0), (103.0, -4.0, 0.0)],
         [(200.0, 0.0, 0.0), (200.0, 0.0, ABOVE_1)],
-        [(math.nextafter(205.0, 206.0), 0.0, 0.0)],
+        [(np.nextafter(205.0, 206.0), 0.0, 0.0)],
     ]
     assert len(blocks) == len(expected)
-    for block, points in zip(blocks, expected, strict=True):
+    for block, points in zip_equal(blocks, expected):
         np.testing.assert_array_equal(np.sort(block.points, axis=0), np.sort(np.array(points), axis=0))
         np.testing.assert_array_equal(block.centroid, np.mean(points, axis=0))
         assert block.keyframes == len(points)

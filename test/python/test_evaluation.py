@@ -1,5 +1,7 @@
 """Evaluation maths against closed forms, brute force and scipy; TUM files; resource protocols."""
 
+from __future__ import annotations
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -20,6 +22,7 @@ from grid_puzzle_localization.evaluation.resources import (
 )
 from grid_puzzle_localization.evaluation.trajectory import Trajectory, make_trajectory, read_tum, write_tum
 from grid_puzzle_localization.monitor.log import METRICS, MonitorLog
+from grid_puzzle_localization.util.iteration import zip_equal
 
 RNG = np.random.default_rng(7)
 
@@ -85,7 +88,7 @@ def test_association_against_brute_force():
         j = int(np.argmin(np.abs(t_b - t)))
         if abs(t_b[j] - t) <= max_diff:
             expected.append((i, j))
-    assert list(zip(ia.tolist(), ib.tolist(), strict=True)) == expected
+    assert list(zip_equal(ia.tolist(), ib.tolist())) == expected
     assert len(expected) > 20
 
 
@@ -211,7 +214,7 @@ def test_cross_check_with_evo():
     from evo.core import metrics as evo_metrics
     from evo.core.trajectory import PoseTrajectory3D
 
-    def evo_traj(tr: Trajectory) -> "PoseTrajectory3D":
+    def evo_traj(tr: Trajectory) -> PoseTrajectory3D:
         return PoseTrajectory3D(tr.xyz, tr.quat[:, [3, 0, 1, 2]], tr.t)  # evo: w first
 
     ref = random_trajectory(300)

@@ -6,6 +6,7 @@ import pytest
 
 from grid_puzzle_localization.blocks.builder import BlockBuilder, BlockConfig
 from grid_puzzle_localization.blocks.map_scans import DiscIndex, MapSubsets
+from grid_puzzle_localization.util.iteration import zip_equal
 
 
 @pytest.mark.parametrize("radius", [0.7, 5.0, 30.0])
@@ -40,7 +41,7 @@ def test_index_blocks_equal_coordinate_blocks():
     assert by_index.report == by_coordinates.report
     assert by_index.report.actions["merge"] + by_index.report.actions["drop"] > 0  # the way back overlaps
     assert [x.keyframes for x in a] == [x.keyframes for x in b]
-    for x, y in zip(a, b, strict=True):
+    for x, y in zip_equal(a, b):
         np.testing.assert_allclose(np.sort(x.points, axis=0), np.sort(y.points, axis=0), atol=1e-9)
         np.testing.assert_allclose(x.centroid, y.centroid, atol=1e-9)
     assert by_index.map_points() == by_coordinates.map_points()

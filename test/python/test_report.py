@@ -1,6 +1,8 @@
 """The report builds from synthetic experiment outputs whose figures are known in closed form, and
 every file it writes parses."""
 
+from __future__ import annotations
+
 import json
 import os
 import stat

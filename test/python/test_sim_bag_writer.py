@@ -1,5 +1,7 @@
 """The simulator's pre-serialized bag messages are byte for byte what genpy serializes for the same message."""
 
+from __future__ import annotations
+
 import io
 
 import numpy as np

@@ -1,6 +1,5 @@
 """Ray casting and beam patterns of the simulator against closed forms."""
 
-import itertools
 from dataclasses import replace
 
 import numpy as np
@@ -14,6 +13,7 @@ from grid_puzzle_localization.sim.movers import make_movers
 from grid_puzzle_localization.sim.raycast import RayCaster
 from grid_puzzle_localization.sim.sensors import SENSORS, SpinningLidar
 from grid_puzzle_localization.sim.trajectory import RATE, Trajectory
+from grid_puzzle_localization.util.iteration import pairwise, zip_equal
 
 
 def _box_world(x0, y0, x1, y1, z0, z1):
@@ -118,7 +118,7 @@ def test_livox_coverage_grows_over_frames_and_hdl_repeats():
     el = np.degrees(np.arcsin(np.concatenate(frames)[:, 2]))
     assert el.min() >= -7.0 - 1e-9 and el.max() <= 52.0 + 1e-9
     cov = [_coverage(np.concatenate(frames[:n]), 0.5, -7.0, 52.0) for n in (1, 2, 5, 10)]
-    assert all(a < b for a, b in itertools.pairwise(cov))
+    assert all(a < b for a, b in pairwise(cov))
     assert cov[0] < 0.3 and cov[-1] > 0.85
     # Frames differ: no direction of frame 0 reappears in frame 1.
     assert not np.any(np.all(np.isclose(frames[0][:100, None], frames[1][None, :100]), axis=2))
@@ -201,7 +201,7 @@ def test_mover_mesh_is_the_mover_shape_at_its_interpolated_pose():
     movers = make_movers(world, 0.3, 30.0, 4, np.random.default_rng(2))
     mesh = movers.mesh_at(12.34, np.array([1e6, 1e6]))  # sensor far away: every mover present
     b = MeshBuilder()
-    for traj, kind, refl in zip(movers.trajectories, movers.kinds, movers.reflectivity, strict=True):
+    for traj, kind, refl in zip_equal(movers.trajectories, movers.kinds, movers.reflectivity):
         p, q = traj.interpolate(np.array([12.34]))
         x, y = p[0, :2]
         heading = Rotation.from_quat(q[0]).as_euler("ZYX")[0]

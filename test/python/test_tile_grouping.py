@@ -1,6 +1,8 @@
 """Grouping a chunk by tile (the C++ library behind tiling.grouping) against plain Python: each point's
 tile floor(x / s), floor(y / s) from Python floats, a stable sort by tile, bounds from min and max."""
 
+from __future__ import annotations
+
 import math
 
 import numpy as np
@@ -10,6 +12,7 @@ from hypothesis import strategies as st
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.tiling.grouping import GROUP_DTYPE, group_chunk
+from grid_puzzle_localization.util.iteration import zip_equal
 
 COORDINATE_TYPES = ["<f4", "<f8", "<i2", "<u4", "<i8"]
 
@@ -29,7 +32,7 @@ def python_grouping(records: np.ndarray, s: float) -> tuple[bytes, list[tuple]]:
             tiles.append((key, at, []))
         tiles[-1][2].append(xyz)
     expected = [
-        (i, j, at, len(xyz), [min(c) for c in zip(*xyz, strict=True)], [max(c) for c in zip(*xyz, strict=True)])
+        (i, j, at, len(xyz), [min(c) for c in zip_equal(*xyz)], [max(c) for c in zip_equal(*xyz)])
         for (i, j), at, xyz in tiles
     ]
     return b"".join(raw[k * size : (k + 1) * size] for _, k, _ in keyed), expected
@@ -68,14 +71,13 @@ def test_grouping_equals_plain_python(records, s):
     assert (groups["chunk"] == 7).all()
     got = [
         (i, j, start, count, low, high)
-        for i, j, start, count, low, high in zip(
+        for i, j, start, count, low, high in zip_equal(
             groups["i"].tolist(),
             groups["j"].tolist(),
             groups["start"].tolist(),
             groups["count"].tolist(),
             groups["min"].tolist(),
             groups["max"].tolist(),
-            strict=True,
         )
     ]
     assert got == expected

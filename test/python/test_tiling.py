@@ -1,6 +1,8 @@
 """The tiler against brute force: every finite point in exactly one tile, bit for bit and in input
 order, the tile being floor(x / s), floor(y / s) computed per point in plain Python."""
 
+from __future__ import annotations
+
 import json
 import math
 import os
@@ -35,6 +37,7 @@ from grid_puzzle_localization.tiling.grouping import GROUP_DTYPE, key_positions
 from grid_puzzle_localization.tiling.index import JSON_BATCH, TileEntry, TileIndex, TileTable, write_index
 from grid_puzzle_localization.tiling.tile_files import TileFileWriter, TileHeader
 from grid_puzzle_localization.tiling.tiler import MIN_TILES_TO_FORK
+from grid_puzzle_localization.util.iteration import zip_equal
 
 FIELDS = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<u1"), ("t", "<f8"), ("n", "<f4", (2,))])
 
@@ -60,7 +63,7 @@ def records_of(cloud: np.ndarray) -> list[bytes]:
 
 def expected_tiles(cloud: np.ndarray, s: float) -> dict[tuple[int, int], bytes]:
     tiles: dict[tuple[int, int], list[bytes]] = defaultdict(list)
-    for record, x, y in zip(records_of(cloud), cloud["x"].tolist(), cloud["y"].tolist(), strict=True):
+    for record, x, y in zip_equal(records_of(cloud), cloud["x"].tolist(), cloud["y"].tolist()):
         tiles[(math.floor(x / s), math.floor(y / s))].append(record)
     return {key: b"".join(records) for key, records in tiles.items()}
 
@@ -410,7 +413,7 @@ def test_index_text_in_parts_is_what_json_would_write(tiles):
     table = TileTable(
         i=i,
         j=j,
-        files=[tile_filename(a, b, 0.3) for a, b in zip(i, j, strict=True)],
+        files=[tile_filename(a, b, 0.3) for a, b in zip_equal(i, j)],
         points=rng.integers(1, 10**6, tiles).tolist(),
         bytes=rng.integers(200, 10**7, tiles).tolist(),
         lower=rng.normal(0.0, 1e5, (3, tiles)).astype(np.float32).astype(float).tolist(),
@@ -427,8 +430,8 @@ def test_index_text_in_parts_is_what_json_would_write(tiles):
             "bytes": size,
             "data_bytes": n * 16,
         }
-        for a, b, f, n, size, x0, y0, z0, x1, y1, z1 in zip(
-            i, j, table.files, table.points, table.bytes, *table.lower, *table.upper, strict=True
+        for a, b, f, n, size, x0, y0, z0, x1, y1, z1 in zip_equal(
+            i, j, table.files, table.points, table.bytes, *table.lower, *table.upper
         )
     ]
     assert b"".join(table.json_parts(0.3, 16)).decode() == json.dumps(expected, separators=(",", ":"))
@@ -439,8 +442,8 @@ def test_index_text_in_parts_is_what_json_would_write(tiles):
 def test_key_positions_equal_a_dictionary_lookup(keys):
     distinct = sorted(set(keys))
     where = {key: t for t, key in enumerate(distinct)}
-    si, sj = (np.array(column, dtype=np.int64) for column in zip(*distinct, strict=True))
-    qi, qj = (np.array(column, dtype=np.int64) for column in zip(*keys, strict=True))
+    si, sj = (np.array(column, dtype=np.int64) for column in zip_equal(*distinct))
+    qi, qj = (np.array(column, dtype=np.int64) for column in zip_equal(*keys))
     assert key_positions(si, sj, qi, qj).tolist() == [where[key] for key in keys]
 
 
@@ -501,7 +504,7 @@ def test_tile_header_declares_n_points_and_knows_its_size(tmp_path):
         os.close(dir_fd)
     texts = [(out / name).read_bytes() for name in names]
     assert template.sizes(np.array(counts)).tolist() == [len(text) for text in texts]
-    for n, text in zip(counts, texts, strict=True):
+    for n, text in zip_equal(counts, texts):
         parsed = parse_header(text, "tile")
         assert (parsed.points, parsed.width, parsed.height, parsed.data) == (n, n, 1, "binary")
         assert parsed.dtype == FIELDS and parsed.header_bytes == len(text)

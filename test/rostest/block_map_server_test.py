@@ -3,6 +3,8 @@
 launch/block_map_server.launch, and drives it with poses: every ~status selection, every map_cloud and
 every ~query_blocks answer must equal the brute-force nearest blocks."""
 
+from __future__ import annotations
+
 import os
 import shutil
 import tempfile

@@ -27,6 +27,7 @@ from std_srvs.srv import Trigger
 from grid_puzzle_localization.pcd import read_pcd
 from grid_puzzle_localization.ros.msgs.cloud import cloud_to_array
 from grid_puzzle_localization.tiles.grid import parse_tile_stem, tile_filename
+from grid_puzzle_localization.util.iteration import zip_equal
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "python"))
 from tile_truth import brute_force_window_files
@@ -146,7 +147,7 @@ class MapProviderTest(unittest.TestCase):
                 self.mirror.clear()
             for tile_id in d.removed_ids:
                 del self.mirror[parse_tile_stem(tile_id, S)]
-            for tile_id, cloud in zip(d.added_ids, d.added_clouds, strict=True):
+            for tile_id, cloud in zip_equal(d.added_ids, d.added_clouds):
                 key = parse_tile_stem(tile_id, S)
                 points = cloud_to_array(cloud)
                 self.assertEqual(points.tobytes(), tile_file_points(self.dir, key).tobytes())

@@ -5,6 +5,8 @@ Writes the bag with the rosbag API, publishes the map (latched map_cloud) and ti
 same scene around the ground-truth position (with one deliberately skipped revision, to exercise the
 resend service), replays the bag with `rosbag play --clock` and compares the trajectories."""
 
+from __future__ import annotations
+
 import subprocess
 import tempfile
 import threading

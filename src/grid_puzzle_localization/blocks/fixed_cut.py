@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.util.iteration import zip_equal
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,6 @@ def cut_submaps(points: np.ndarray, config: SubmapConfig) -> Iterator[tuple[tupl
     order = np.lexsort((rows, cells[:, 1], cells[:, 0]))
     cells, rows = cells[order], rows[order]
     starts = np.flatnonzero(np.any(np.diff(cells, axis=0) != 0, axis=1)) + 1
-    for group_cells, group_rows in zip(np.split(cells, starts), np.split(rows, starts), strict=True):
+    for group_cells, group_rows in zip_equal(np.split(cells, starts), np.split(rows, starts)):
         if len(group_rows):
             yield (int(group_cells[0, 0]), int(group_cells[0, 1])), points[group_rows]

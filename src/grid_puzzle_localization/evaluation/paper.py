@@ -1,6 +1,8 @@
 """The grid puzzle paper's published figures (Section IV), for side-by-side comparison. CPU in
 percent of one core, memory in MB as the paper prints it (psutil), RMSE in metres."""
 
+from __future__ import annotations
+
 PAPER_FIGURES: dict[str, dict] = {
     "courtyard": {
         "n": 17,

@@ -13,6 +13,7 @@ import numpy as np
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.util.atomic import atomic_write
+from grid_puzzle_localization.util.iteration import zip_equal
 
 
 @dataclass(frozen=True)
@@ -98,4 +99,4 @@ def write_tum(path: str | os.PathLike, traj: Trajectory, stamps_ns: np.ndarray |
         np.savetxt(poses, np.hstack([traj.xyz, traj.quat]), fmt="%.9f")
         secs, nsecs = np.divmod(stamps_ns, 10**9)
         lines = poses.getvalue().splitlines()
-        f.writelines(f"{s}.{n:09d} {pose}\n" for s, n, pose in zip(secs.tolist(), nsecs.tolist(), lines, strict=True))
+        f.writelines(f"{s}.{n:09d} {pose}\n" for s, n, pose in zip_equal(secs.tolist(), nsecs.tolist(), lines))

@@ -12,6 +12,7 @@ import psutil
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.monitor.log import METRICS, Event, MonitorLog
+from grid_puzzle_localization.util.iteration import zip_equal
 
 
 @dataclass(frozen=True)
@@ -174,7 +175,7 @@ class Monitor:
         pid = {name: np.full(n, -1, dtype=np.int64) for name in self._names}
         values = {m: {name: np.full(n, np.nan) for name in self._names} for m in METRICS}
         for i, readings in enumerate(rows):
-            for name, r in zip(self._names, readings, strict=True):
+            for name, r in zip_equal(self._names, readings):
                 if r is None:
                     continue
                 pid[name][i] = r.pid

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from grid_puzzle_localization.errors import PcdError
+from grid_puzzle_localization.util.iteration import zip_equal
 
 ENCODINGS = ("ascii", "binary", "binary_compressed")
 IDENTITY_VIEWPOINT = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
@@ -44,13 +45,13 @@ class PcdHeader:
         return np.dtype(
             [
                 (name, f"<{_KINDS[t]}{size}", (count,)) if count > 1 else (name, f"<{_KINDS[t]}{size}")
-                for name, size, t, count in zip(self.fields, self.sizes, self.types, self.counts, strict=True)
+                for name, size, t, count in zip_equal(self.fields, self.sizes, self.types, self.counts)
             ]
         )
 
     @property
     def record_bytes(self) -> int:
-        return sum(s * c for s, c in zip(self.sizes, self.counts, strict=True))
+        return sum(s * c for s, c in zip_equal(self.sizes, self.counts))
 
     @property
     def data_bytes(self) -> int:
@@ -156,7 +157,7 @@ def _checked_header(entries: dict[str, list[str]], offset: int, path) -> PcdHead
     for key, values in (("SIZE", sizes), ("TYPE", types), ("COUNT", counts)):
         if len(values) != n:
             raise PcdError(f"{path}: {key} has {len(values)} entries but FIELDS names {n} fields")
-    for name, size, t, count in zip(fields, sizes, types, counts, strict=True):
+    for name, size, t, count in zip_equal(fields, sizes, types, counts):
         if t not in _VALID_SIZES or size not in _VALID_SIZES[t] or count < 1:
             raise PcdError(f"{path}: field '{name}' has unsupported TYPE {t} SIZE {size} COUNT {count}")
     width, height, points = (_ints(entries, key, path, single=True)[0] for key in ("WIDTH", "HEIGHT", "POINTS"))

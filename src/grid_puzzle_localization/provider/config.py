@@ -80,7 +80,7 @@ def _coerce(name: str, value: Any, kind: type) -> Any:
     ok = {
         bool: isinstance(value, bool),
         int: isinstance(value, int) and not isinstance(value, bool),
-        float: isinstance(value, int | float) and not isinstance(value, bool),
+        float: isinstance(value, (int, float)) and not isinstance(value, bool),
         str: isinstance(value, str),
     }[kind]
     if not ok:

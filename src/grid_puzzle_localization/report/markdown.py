@@ -183,7 +183,7 @@ def storage_table(summary: Mapping) -> list[str]:
 def render_report(summary: Mapping) -> str:
     """The whole report.md."""
     sc = summary["scenario"]
-    setting = ", ".join(f"{k} = {v}" for k, v in sc.items() if not isinstance(v, Mapping | list))
+    setting = ", ".join(f"{k} = {v}" for k, v in sc.items() if not isinstance(v, (Mapping, list)))
     lines = [
         "# Grid puzzle map experiment",
         "",

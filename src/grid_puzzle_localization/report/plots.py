@@ -14,6 +14,7 @@ from grid_puzzle_localization.evaluation.trajectory import Trajectory
 from grid_puzzle_localization.monitor.log import MonitorLog
 from grid_puzzle_localization.report.markdown import MIB, MODE_TITLES
 from grid_puzzle_localization.util.atomic import atomic_write
+from grid_puzzle_localization.util.iteration import zip_equal
 
 COLORS = {"global": "tab:blue", "grid_puzzle": "tab:orange", "block_map": "tab:green"}
 
@@ -41,7 +42,7 @@ def plot_resource(
     protocols = list(next(iter(processes.values())))
     fig = Figure(figsize=(9, 3.2 * len(protocols)), layout="constrained")
     axes = fig.subplots(len(protocols), 1, squeeze=False)[:, 0]
-    for ax, protocol in zip(axes, protocols, strict=True):
+    for ax, protocol in zip_equal(axes, protocols):
         for mode, log in logs.items():
             values = log.sum(metric, list(processes[mode][protocol])) / scale
             ax.plot(log.t_s, values, color=COLORS.get(mode), label=_title(mode), lw=1.2)
@@ -94,7 +95,7 @@ def plot_errors(
     fig = Figure(figsize=(9, 3.2 * max(1, len(panels))), layout="constrained")
     axes = fig.subplots(max(1, len(panels)), 1, squeeze=False)[:, 0]
     t0 = min(float(tr.t[0]) for tr in trajectories.values() if len(tr))
-    for ax, panel in zip(axes, panels, strict=False):
+    for ax, panel in zip(axes, panels):
         reference = ground_truth if panel == "ground truth" else trajectories[baseline]
         for mode, traj in trajectories.items():
             if panel == baseline and mode == baseline:

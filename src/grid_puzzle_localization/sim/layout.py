@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from grid_puzzle_localization.util.iteration import zip_equal
+
 _SAMPLE_STEP = 0.5  # [m] spacing of the corridor samples used for clearance tests
 
 
@@ -36,7 +38,7 @@ class PathGraph:
     def samples(self) -> tuple[np.ndarray, np.ndarray]:
         """Points every ~0.5 m along all edges (k, 2) and the half-width of their edge (k,)."""
         pts, hw = [], []
-        for (a, b), w in zip(self.edges, self.half_width, strict=True):
+        for (a, b), w in zip_equal(self.edges, self.half_width):
             p, q = self.nodes[a], self.nodes[b]
             n = max(2, int(np.ceil(np.linalg.norm(q - p) / _SAMPLE_STEP)) + 1)
             f = np.linspace(0.0, 1.0, n)[:, None]

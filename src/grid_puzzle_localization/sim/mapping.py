@@ -24,6 +24,7 @@ from scipy.spatial.transform import Rotation
 
 from grid_puzzle_localization.sim.lidar import Mount
 from grid_puzzle_localization.sim.trajectory import RATE, Trajectory, transform
+from grid_puzzle_localization.util.iteration import zip_equal
 
 MAP_DTYPE = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4")])
 _OFFSET = 1 << 20  # voxel indices are stored biased by this, 21 bits per axis
@@ -126,7 +127,7 @@ class VoxelMap:
         tile, key, sums, sum_i, count = tile[order], key[order], sums[order], sum_i[order], count[order]
         starts = np.flatnonzero(np.concatenate([[True], tile[1:] != tile[:-1]]))
         ends = np.append(starts[1:], len(tile))
-        for a, b in zip(starts, ends, strict=True):
+        for a, b in zip_equal(starts, ends):
             self._merge(int(tile[a]), key[a:b], sums[a:b], sum_i[a:b], count[a:b])
 
     def _merge(self, tile: int, key: np.ndarray, sums: np.ndarray, sum_i: np.ndarray, count: np.ndarray) -> None:

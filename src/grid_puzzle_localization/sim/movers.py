@@ -17,6 +17,7 @@ from grid_puzzle_localization.sim import meshes
 from grid_puzzle_localization.sim.meshes import Mesh, MeshBuilder
 from grid_puzzle_localization.sim.trajectory import RATE, MotionProfile, Trajectory, make_trajectory, plan_route
 from grid_puzzle_localization.sim.worlds import Ground, World, car
+from grid_puzzle_localization.util.iteration import zip_equal
 
 PEDESTRIAN = MotionProfile(0.0, 1.2, 1.0, -0.8, 0.8, 1.0, 0.6, 0.1, (1.0, 5.0), 0.0, 0.1, 0.25)
 CAR = MotionProfile(0.0, 6.0, 9.0, 2.5, 1.5, 2.5, 2.0, 0.3, (3.0, 10.0), 8.0, 0.25, 0.2)
@@ -56,7 +57,7 @@ class Movers:
         """The movers at time ``t`` [s] as one mesh, without those near ``sensor_xy``; None if none remain."""
         vertices, faces, reflectivity = [], [], []
         count = 0
-        for traj, yaw, kind, refl in zip(self.trajectories, self._yaw, self.kinds, self.reflectivity, strict=True):
+        for traj, yaw, kind, refl in zip_equal(self.trajectories, self._yaw, self.kinds, self.reflectivity):
             f = min(max(t * RATE, 0.0), len(yaw) - 1.0)
             i = min(int(f), len(yaw) - 2)
             w = f - i

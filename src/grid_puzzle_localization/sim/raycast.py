@@ -6,7 +6,6 @@ GIL while tracing), so the result does not depend on the thread count.
 
 from __future__ import annotations
 
-import itertools
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -14,6 +13,7 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
 from grid_puzzle_localization.sim.meshes import Mesh
+from grid_puzzle_localization.util.iteration import pairwise
 
 _MIN_RAYS_PER_THREAD = 20000
 
@@ -55,7 +55,7 @@ class RayCaster:
             t, prim = self._cast(o, d)
         else:
             bounds = np.linspace(0, n, parts + 1).astype(int)
-            jobs = [self._pool.submit(self._cast, o[a:b], d[a:b]) for a, b in itertools.pairwise(bounds)]
+            jobs = [self._pool.submit(self._cast, o[a:b], d[a:b]) for a, b in pairwise(bounds)]
             results = [j.result() for j in jobs]
             t = np.concatenate([r[0] for r in results])
             prim = np.concatenate([r[1] for r in results])

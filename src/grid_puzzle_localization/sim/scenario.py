@@ -143,10 +143,9 @@ def _write_bag(
 
     rays = points = 0
     clouds = ordered_map(sweep_cloud, n_sweeps, cfg.threads)
-    with (
-        ScenarioBag(str(path), BagNames()) as bag,
-        _progress(n_sweeps, "localization run", show) as bar,
-        closing(clouds),  # an error stops the queued sweeps at once
+    # closing(clouds): an error stops the queued sweeps at once
+    with ScenarioBag(str(path), BagNames()) as bag, _progress(n_sweeps, "localization run", show) as bar, closing(
+        clouds
     ):
         bag.write_tf_static(t0, mount.translation, Rotation.from_matrix(mount.rotation).as_quat())
 

@@ -24,6 +24,7 @@ from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.sim import meshes
 from grid_puzzle_localization.sim.layout import PathGraph, Placement, add_diagonals, grid_graph
 from grid_puzzle_localization.sim.meshes import Mesh, MeshBuilder
+from grid_puzzle_localization.util.iteration import zip_equal
 
 
 @dataclass(frozen=True)
@@ -116,7 +117,7 @@ def _pole(b: MeshBuilder, ground: Ground, x: float, y: float, height: float) -> 
 def _along_edges(graph: PathGraph, spacing: float, offset: Callable[[float], float], rng: np.random.Generator):
     """Yields (x, y, unit direction, half-width) at ~``spacing`` intervals on both sides of every edge,
     ``offset(half_width)`` metres from the centre line, skipping the ends (crossings)."""
-    for (a, c), hw in zip(graph.edges, graph.half_width, strict=True):
+    for (a, c), hw in zip_equal(graph.edges, graph.half_width):
         p, q = graph.nodes[a], graph.nodes[c]
         length = float(np.linalg.norm(q - p))
         u = (q - p) / length

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from grid_puzzle_localization.tiling.grouping import GROUP_DTYPE, key_positions, merge_stats, tile_spans
+from grid_puzzle_localization.util.iteration import zip_equal
 
 _IOV_MAX = 1024
 
@@ -41,7 +42,7 @@ class TileSet:
         row columns become plain lists first, so that a tile costs no numpy call."""
         chunk, first, last = (rows.tolist() for rows in (self.row_chunk, self.row_first, self.row_last))
         chunks = self.chunks
-        for b, e in zip(self.row_begin.tolist(), self.row_end.tolist(), strict=True):
+        for b, e in zip_equal(self.row_begin.tolist(), self.row_end.tolist()):
             yield [chunks[chunk[r]][first[r] : last[r]] for r in range(b, e)]
 
 
@@ -71,8 +72,8 @@ class TileBuffer:
         self.spill_dir.mkdir(exist_ok=True)
         rows, first, last = self._fold()
         buffered = self._tile_set(rows[first], [None] * len(first), first, last, rows)
-        keys = zip(buffered.stats["i"].tolist(), buffered.stats["j"].tolist(), strict=True)
-        for (i, j), parts in zip(keys, buffered.parts(), strict=True):
+        keys = zip_equal(buffered.stats["i"].tolist(), buffered.stats["j"].tolist())
+        for (i, j), parts in zip_equal(keys, buffered.parts()):
             fd = os.open(self._spill_path(i, j), os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600)
             try:
                 write_all(fd, parts)
@@ -93,7 +94,7 @@ class TileBuffer:
         row_begin[at], row_end[at] = first, last
         spills: list[Path | None] = [None] * len(stats)
         if self._spilled:
-            i, j = (np.concatenate(keys) for keys in zip(*self._spilled, strict=True))
+            i, j = (np.concatenate(keys) for keys in zip_equal(*self._spilled))
             for t in np.unique(key_positions(stats["i"], stats["j"], i, j)).tolist():
                 spills[t] = self._spill_path(int(stats["i"][t]), int(stats["j"][t]))
         tiles = self._tile_set(stats, spills, row_begin, row_end, rows)

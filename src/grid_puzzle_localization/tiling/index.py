@@ -45,6 +45,7 @@ from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.tiles.grid import tile_center
 from grid_puzzle_localization.tiling import native
 from grid_puzzle_localization.util.atomic import atomic_write
+from grid_puzzle_localization.util.iteration import zip_equal
 
 INDEX_FILE = "index.json"
 AUTOWARE_METADATA_FILE = "pointcloud_map_metadata.yaml"
@@ -104,7 +105,7 @@ class TileTable:
         """Per tile, in key order: i, j, stem, file, cx, cy, points, min x y z, max x y z, bytes and
         data bytes. The derived columns (stem, centre, data bytes) are computed here for readers and in
         tile_index_json.cpp for the index text; the tests hold both to json.dumps of the same entries."""
-        columns = zip(self.i, self.j, self.files, self.points, self.bytes, *self.lower, *self.upper, strict=True)
+        columns = zip_equal(self.i, self.j, self.files, self.points, self.bytes, *self.lower, *self.upper)
         for i, j, f, n, b, x0, y0, z0, x1, y1, z1 in columns:
             yield (
                 i,
@@ -228,7 +229,7 @@ def write_index(directory: Path, index: TileIndex) -> None:
 def write_autoware_metadata(directory: Path, index: TileIndex) -> None:
     s, t = index.grid_size, index.table
     lines = [f"x_resolution: {s!r}", f"y_resolution: {s!r}"]
-    lines += [f'"{f}": [{i * s!r}, {j * s!r}]' for f, i, j in zip(t.files, t.i, t.j, strict=True)]
+    lines += [f'"{f}": [{i * s!r}, {j * s!r}]' for f, i, j in zip_equal(t.files, t.i, t.j)]
     with atomic_write(directory / AUTOWARE_METADATA_FILE, "wb", fsync=False) as f:
         f.write(("\n".join(lines) + "\n").encode())
 

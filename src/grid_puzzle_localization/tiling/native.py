@@ -45,7 +45,7 @@ def c_strings(texts: list[str]) -> bytes:
     return "".join(f"{text}\0" for text in texts).encode()
 
 
-@functools.cache
+@functools.lru_cache(maxsize=None)
 def library() -> ctypes.CDLL:
     """The library with its functions' signatures; UserError when it is not on the library path."""
     try:

@@ -20,6 +20,8 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
 
+from grid_puzzle_localization.util.iteration import exit_code
+
 T = TypeVar("T")
 R = TypeVar("R")
 
@@ -88,27 +90,32 @@ def in_background(
             job()
         yield
         return
-    children: dict[int, int] = {}  # pid -> pidfd, readable once the child has exited
+    # pid -> read end of a pipe whose write end only the child holds: readable (end of file) once it exited.
+    # A pipe rather than os.pidfd_open, which Python 3.8 lacks.
+    children: dict[int, int] = {}
     try:
         for job in jobs:
+            read_end, write_end = os.pipe()
             pid = os.fork()
             if pid == 0:  # child: never return into the caller's stack
+                os.close(read_end)
                 _run_child(job)
-            children[pid] = os.pidfd_open(pid)
+            os.close(write_end)
+            children[pid] = read_end
         yield
     finally:
         try:
             codes = _wait_for(children, while_waiting)
         finally:
-            for pidfd in children.values():
-                os.close(pidfd)
+            for exit_fd in children.values():
+                os.close(exit_fd)
     failed = [code for code in codes if code != 0]
     if failed:
         raise OSError(f"a tile writer process failed (exit status {failed[0]}); see the error above")
 
 
 def _wait_for(children: dict[int, int], while_waiting: Callable[[], None] | None) -> list[int]:
-    """Exit codes of the children (pid -> pidfd), calling ``while_waiting`` between waits while any runs."""
+    """Exit codes of the children (pid -> exit pipe), calling ``while_waiting`` between waits while any runs."""
     codes: dict[int, int] = {}
     while len(codes) < len(children):
         for pid in children:
@@ -116,8 +123,8 @@ def _wait_for(children: dict[int, int], while_waiting: Callable[[], None] | None
                 continue
             done, status = os.waitpid(pid, os.WNOHANG if while_waiting else 0)
             if done:
-                codes[pid] = os.waitstatus_to_exitcode(status)
-        running = [pidfd for pid, pidfd in children.items() if pid not in codes]
+                codes[pid] = exit_code(status)
+        running = [exit_fd for pid, exit_fd in children.items() if pid not in codes]
         if while_waiting is not None and running:
             while_waiting()
             select.select(running, [], [], WAIT_PAUSE_S)

@@ -34,6 +34,7 @@ from grid_puzzle_localization.tiling.index import TileIndex, TileTable, write_au
 from grid_puzzle_localization.tiling.parallel import SharedBatches, in_background, map_ahead
 from grid_puzzle_localization.tiling.tile_files import TileFileWriter, TileHeader
 from grid_puzzle_localization.util.atomic import atomic_directory, check_output_dir, sync_filesystem
+from grid_puzzle_localization.util.iteration import zip_equal
 
 MIN_MEMORY_MB = 1.0
 _CHUNK_SHARE = 0.30
@@ -67,7 +68,7 @@ def check_inputs(paths: Sequence[Path]) -> list[PcdHeader]:
     if not paths:
         raise UserError("no input PCD given; pass at least one MAP.pcd")
     headers = [read_pcd_header(p) for p in paths]
-    for path, header in zip(paths, headers, strict=True):
+    for path, header in zip_equal(paths, headers):
         check_xyz(header, path)
         if header.dtype != headers[0].dtype:
             raise UserError(
@@ -170,7 +171,7 @@ def _write_tile_files(
 def _tile_names(tiles: TileSet, s: float, which: range) -> list[str]:
     """File names of tiles ``which``: each writer names its own tiles, the index names them all."""
     stats = tiles.stats[which.start : which.stop]
-    return [tile_filename(i, j, s) for i, j in zip(stats["i"].tolist(), stats["j"].tolist(), strict=True)]
+    return [tile_filename(i, j, s) for i, j in zip_equal(stats["i"].tolist(), stats["j"].tolist())]
 
 
 def _tile_index(
@@ -188,7 +189,7 @@ def _tile_index(
         grid_size=s,
         fields=[
             {"name": n, "size": z, "type": t, "count": c}
-            for n, z, t, c in zip(header.fields, header.sizes, header.types, header.counts, strict=True)
+            for n, z, t, c in zip_equal(header.fields, header.sizes, header.types, header.counts)
         ],
         record_bytes=record,
         points=int(counts.sum()),
@@ -240,5 +241,5 @@ class _NoBar:
 
 def _describe(header: PcdHeader) -> str:
     return " ".join(
-        f"{n}:{t}{s}x{c}" for n, s, t, c in zip(header.fields, header.sizes, header.types, header.counts, strict=True)
+        f"{n}:{t}{s}x{c}" for n, s, t, c in zip_equal(header.fields, header.sizes, header.types, header.counts)
     )

@@ -29,7 +29,7 @@ REUSE_MMAP_THRESHOLD_BYTES = 32 * 2**20  # glibc's largest mmap threshold on 64-
 REUSE_TRIM_THRESHOLD_BYTES = 256 * 2**20  # free heap kept for reuse before it goes back to the OS
 
 
-@functools.cache
+@functools.lru_cache(maxsize=None)
 def _libc():
     """The C library when it is glibc (has mallopt and malloc_trim), else None."""
     try:

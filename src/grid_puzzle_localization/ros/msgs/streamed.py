@@ -25,6 +25,7 @@ from std_msgs.msg import Header
 
 from grid_puzzle_localization.msg import TileDelta
 from grid_puzzle_localization.ros.msgs.cloud import byte_order_is_big, check_parts, fields_of
+from grid_puzzle_localization.util.iteration import zip_equal
 
 _U32 = struct.Struct("<I")
 _HEADER = struct.Struct("<3I")  # seq, stamp secs, stamp nsecs
@@ -138,9 +139,9 @@ class StreamedTileDelta(TileDelta):
             ]
         )
         tail = _strings(self.removed_ids) + _BOUNDS.pack(self.i_min, self.i_max, self.j_min, self.j_max)
-        data = sum(len(p) + a.nbytes + 1 for p, a in zip(prefixes, self._added_points, strict=True))
+        data = sum(len(p) + a.nbytes + 1 for p, a in zip_equal(prefixes, self._added_points))
         _reserve(buff, len(head) + data + len(tail))
         buff.write(head)
-        for prefix, points in zip(prefixes, self._added_points, strict=True):
+        for prefix, points in zip_equal(prefixes, self._added_points):
             _write_cloud(buff, prefix, [points], self._clouds_dense)
         buff.write(tail)
