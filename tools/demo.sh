@@ -1,13 +1,12 @@
 #!/usr/bin/env bash
-# make demo: simulate a small courtyard scenario (cached in results/demo/scenario), then run the
-# experiment in global and grid puzzle modes and write the report and plots to results/demo/.
+# make demo: simulate the full-size courtyard world, 100 s of walking (cached in results/demo/scenario), then
+# run the experiment in global and grid puzzle modes and write the report and plots to results/demo/.
 # Runs from a shell that sourced the devel space (the Makefile does that).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 out="$root/results/demo"
 scenario="$out/scenario"
-# The full-size courtyard world, 100 s of walking with the first turn (the map covers the route), the
-# Livox-like sensor as in the paper.
+# 100 s covers the first turn of the route (the map covers the whole route); the Livox-like sensor as in the paper.
 sim_args=(courtyard --scale 1.0 --duration 100 --seed 1)
 stamp="$scenario/.demo-args"
 if [[ ! -f "$scenario/scenario.yaml" || "$(cat "$stamp" 2>/dev/null)" != "${sim_args[*]}" ]]; then

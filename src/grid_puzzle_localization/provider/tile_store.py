@@ -58,11 +58,6 @@ class StoreStats:
     prefetched: int = 0  # tiles read by the background thread
     corrupt: list[str] = field(default_factory=list)
 
-    @property
-    def hit_rate(self) -> float:
-        total = self.cache_hits + self.cache_misses
-        return self.cache_hits / total if total else float("nan")
-
 
 class TileStore:
     def __init__(

@@ -113,9 +113,6 @@ class Window:
     def bounds(self) -> tuple[int, int, int, int]:
         return self.i_min, self.i_max, self.j_min, self.j_max
 
-    def contains(self, i: int, j: int) -> bool:
-        return self.i_min <= i <= self.i_max and self.j_min <= j <= self.j_max
-
     def keys(self) -> np.ndarray:
         """All (i, j) in the window as an (M, 2) int64 array, i-major."""
         ii, jj = np.meshgrid(

@@ -200,9 +200,6 @@ class TileIndex:
     def path(self, entry: TileEntry) -> Path:
         return self.directory / entry.file
 
-    def by_key(self) -> dict[tuple[int, int], TileEntry]:
-        return {entry.key: entry for entry in self.tiles}
-
     def json_parts(self) -> Iterator[bytes]:
         """The index as compact JSON, in parts (see TileTable.json_parts)."""
         head = {
