@@ -10,6 +10,7 @@
 - block server: load + merge time of the 2 nearest blocks (cache off) at keyframe positions.
 
 Times are medians over --repeats runs (wall clock, one thread). Usage: bench_blocks.py [--repeats 3]
+Prints one JSON line. --quick: a synthetic 100 m x 100 m map, one repeat (checks that it runs without the data).
 """
 
 from __future__ import annotations
@@ -44,8 +45,20 @@ STEP = 2.0  # [m] between keyframes on the walk
 
 def load_map() -> tuple[np.ndarray, list[Path]]:
     files = sorted((DATA / "tiles").glob("*.pcd"))
+    if not files:
+        raise SystemExit(f"bench_blocks: no tiles in {DATA / 'tiles'} (the real campus map); --quick runs without it")
     parts = [xyz_array(chunk) for f in files if read_pcd_header(f).points for chunk in iter_pcd_chunks(f)]
     return np.concatenate(parts), files
+
+
+def synthetic_map(tmp: Path) -> tuple[np.ndarray, Path]:
+    """20,000 seeded points over 4 x 4 of the data set's tiles and those tiles (gpm tile), for --quick."""
+    rng = np.random.default_rng(0)
+    points = np.column_stack([rng.uniform(0.0, 4 * TILE, (20_000, 2)), rng.uniform(0.0, 3.0, 20_000)])
+    write_pcd(tmp / "synthetic.pcd", xyz_records(points))
+    if gpm(["tile", str(tmp / "synthetic.pcd"), "-o", str(tmp / "tiles"), "--grid-size", f"{TILE:g}"]) != 0:
+        raise SystemExit("bench_blocks: gpm tile failed on the synthetic map")
+    return points, tmp / "tiles"
 
 
 def walk(points: np.ndarray) -> np.ndarray:
@@ -101,10 +114,17 @@ def main() -> None:
     parser.add_argument("--overlap", type=float, default=0.5, help="fixed submap overlap ratio o")
     parser.add_argument("--block-size", type=float, default=50.0, help="block size S [m]")
     parser.add_argument("--voxel", type=float, default=0.2, help="block voxel [m]")
+    parser.add_argument("--quick", action="store_true", help="synthetic small map, one repeat: checks that it runs")
     args = parser.parse_args()
-    points, tile_files = load_map()
     with tempfile.TemporaryDirectory(prefix="gpm_bench_blocks_") as tmp:
         tmp = Path(tmp)
+        if args.quick:
+            args.repeats = 1
+            points, tile_dir = synthetic_map(tmp)
+            tile_files = sorted(tile_dir.glob("*.pcd"))
+        else:
+            points, tile_files = load_map()
+            tile_dir = DATA / "tiles"
         write_pcd(tmp / "map.pcd", xyz_records(points))
         submap_args = ["submaps", str(tmp / "map.pcd"), str(tmp / "submaps"), "--force"]
         submap_args += ["--side", str(args.side), "--overlap", str(args.overlap)]
@@ -121,7 +141,7 @@ def main() -> None:
             {},
             union,
         )
-        rows = storage_table(tmp / "map.pcd", DATA / "tiles", tmp / "blocks", tmp / "submaps")
+        rows = storage_table(tmp / "map.pcd", tile_dir, tmp / "blocks", tmp / "submaps")
         server = {}
         for name in ("blocks", "submaps"):
             index = read_block_index(tmp / name)
@@ -144,7 +164,7 @@ def main() -> None:
         json.dumps(
             {
                 "benchmark": "bench_blocks",
-                "data": "nova_utd_tiles (real campus map)",
+                "data": "synthetic (--quick)" if args.quick else "nova_utd_tiles (real campus map)",
                 "hardware": {"cpu": cpu_model(), "cores": os.cpu_count(), "threads_used": 1},
                 "repeats": args.repeats,
                 "map_points": len(points),
@@ -163,8 +183,7 @@ def main() -> None:
                 },
                 "storage": [r.as_dict() for r in rows],
                 "server_2_nearest": server,
-            },
-            indent=2,
+            }
         )
     )
 

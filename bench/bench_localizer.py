@@ -2,7 +2,7 @@
 localizer without roscore. Writes the scans, the gyro samples and the map to a temporary input file, runs the
 C++ bench_localizer once per map mode (cloud: the merged window rebuilt per change; tiles: incremental deltas)
 and once as the control (repeat: the same scan against a fixed map at every slot, whose spread is the machine's
-own) and prints one JSON line per run, with the machine it ran on."""
+own) and prints one JSON line per run, with the machine it ran on. --quick: a 2 s drive (checks that it runs)."""
 
 from __future__ import annotations
 
@@ -53,10 +53,13 @@ def main() -> int:
     parser.add_argument("--tile-size", type=float, default=10.0, help="tile side [m] (default 10)")
     parser.add_argument("--window", type=int, default=3, help="tiles on each side of the vehicle (default 3)")
     parser.add_argument("--threads", type=int, help="NDT OpenMP threads, 0 = all cores (default: the localizer's)")
+    parser.add_argument("--quick", action="store_true", help="a 2 s drive: checks that it runs")
     parser.add_argument("--trace", type=Path, help="write per-scan CSV traces to DIR/<mode>.csv (cloud, tiles)")
     workspace = Path(os.environ["GPL_WS"])  # exported by tools/env.sh (the Makefile sources it)
     parser.add_argument("--exe", type=Path, default=workspace / "devel/lib/grid_puzzle_localization/bench_localizer")
     args = parser.parse_args()
+    if args.quick:
+        args.duration = 2.0
     # Other processes compete for the cores: the load average says how much (latency tails depend on it).
     hardware = {"cpu_model": cpu_model(), "cores": os.cpu_count(), "load_average_1min": os.getloadavg()[0]}
     with tempfile.TemporaryDirectory() as tmp:

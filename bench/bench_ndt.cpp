@@ -1,5 +1,6 @@
 // NDT benchmark: our matcher (each search method, 1 and 2 threads) and PCL 1.13's NDT on the real HDL-32E pair,
-// plus the incremental target update. Prints one JSON object per line.
+// plus the incremental target update. Prints one JSON object per line. Usage: bench_ndt [ours|pcl|incremental|--quick]
+// (--quick: one configuration of each, one repeat: checks that it runs).
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
 #include <pcl/registration/ndt.h>
@@ -21,7 +22,7 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
-constexpr int kRepeats = 15;  // warm aligns per configuration (median reported)
+int g_repeats = 15;  // warm aligns per configuration (median reported); 1 with --quick
 
 double msSince(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
@@ -77,7 +78,7 @@ void benchOurs(const gpl::PointCloud& target, const gpl::PointCloud& source, gpl
   gpl::NdtResult r = aligner.align(*map, source, guess);
   const double cold = msSince(t0);
   std::vector<double> builds, times, cpu;
-  for (int i = 0; i < kRepeats; ++i) {
+  for (int i = 0; i < g_repeats; ++i) {
     t0 = Clock::now();
     gpl::NdtTarget rebuilt(cfg);
     rebuilt.setTarget(target);
@@ -119,7 +120,7 @@ void benchPcl(const gpl::PointCloud& target, const gpl::PointCloud& source) {
   ndt.align(out, Eigen::Matrix4f::Identity());
   const double cold = msSince(t0);
   std::vector<double> times, cpu;
-  for (int i = 0; i < kRepeats; ++i) {
+  for (int i = 0; i < g_repeats; ++i) {
     const double c0 = cpuMs();
     t0 = Clock::now();
     ndt.align(out, Eigen::Matrix4f::Identity());
@@ -145,7 +146,7 @@ void benchIncremental(int threads) {
     target.setTarget(world);
     full.push_back(msSince(t0));
   }
-  for (int i = 0; i < kRepeats; ++i) {
+  for (int i = 0; i < g_repeats; ++i) {
     auto t0 = Clock::now();
     target.addTarget(1, tile);
     add.push_back(msSince(t0));
@@ -165,8 +166,16 @@ void benchIncremental(int threads) {
 
 int main(int argc, char** argv) {
   const std::string only = argc > 1 ? argv[1] : "";
+  const bool quick = only == "--quick";
+  if (quick) g_repeats = 1;
   const gpl::PointCloud target = gpl::real_pair::target();
   const gpl::PointCloud source = gpl::real_pair::source();
+  if (quick) {
+    benchOurs(target, source, gpl::NdtSearchMethod::DIRECT7, 1);
+    benchPcl(target, source);
+    benchIncremental(1);
+    return 0;
+  }
   if (only.empty() || only == "ours")
     for (const auto m : {gpl::NdtSearchMethod::DIRECT1, gpl::NdtSearchMethod::DIRECT7, gpl::NdtSearchMethod::DIRECT27,
                          gpl::NdtSearchMethod::RADIUS})

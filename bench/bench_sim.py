@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Benchmark of `gpm simulate`: prints one JSON object.
+"""Benchmark of `gpm simulate`: prints one JSON object per line (ray casting, then one per scenario).
 
 - rays_per_s: Embree ray casting of HDL-32E-like sweeps in the full-scale urban world (median of repeats);
 - sweep_rays_per_s: the same including per-ray poses, noise and point packing, one sweep per thread
@@ -8,7 +8,9 @@
   the localization run and its rays per second (sweeps, movers, IMU, bag writing), the mapping run's rays
   per second, both together (generation_rays_per_s), rays per CPU-second of the process (all threads;
   meaningful on a shared machine) and prior-map points accumulated per second, plus the final map size;
-- peak RSS of this process and hardware info (CPU model, cores, threads used).
+- peak RSS of this process and hardware info (CPU model, cores, threads used) on every line.
+
+--quick: a few seconds on small worlds (scale 0.2, 1 s, one repeat), to check that the benchmark runs.
 """
 
 from __future__ import annotations
@@ -36,8 +38,8 @@ from grid_puzzle_localization.sim.trajectory import localization_trajectory
 from grid_puzzle_localization.util.malloc_tuning import reuse_large_buffers
 
 
-def _raycast(threads: int, repeats: int, sweeps: int) -> dict:
-    world = worlds.make_world("urban", 0, 1.0)
+def _raycast(threads: int, repeats: int, sweeps: int, scale: float) -> dict:
+    world = worlds.make_world("urban", 0, scale)
     traj = localization_trajectory(world, 1.0, _rng(0, 1))
     sensor = SENSORS["hdl32"]
     cast_rates, sweep_rates = [], []
@@ -64,15 +66,18 @@ def _raycast(threads: int, repeats: int, sweeps: int) -> dict:
                 pass
             sweep_rates.append(sweeps * sensor.rays_per_sweep / (time.perf_counter() - start))
     return {
+        "bench": "sim_raycast",
+        "world": "urban",
+        "scale": scale,
         "rays_per_s": round(statistics.median(cast_rates)),
         "sweep_rays_per_s": round(statistics.median(sweep_rates)),
         "urban_triangles": len(world.mesh.faces),
     }
 
 
-def _scenario(world: str, duration: float, threads: int, repeats: int) -> dict:
+def _scenario(world: str, duration: float, threads: int, repeats: int, scale: float) -> dict:
     """End-to-end `gpm simulate` figures, each the median over ``repeats`` runs (the output is identical)."""
-    cfg = ScenarioConfig(world=world, duration=duration, threads=threads)
+    cfg = ScenarioConfig(world=world, duration=duration, threads=threads, scale=scale)
     runs = []
     for _ in range(repeats):
         with tempfile.TemporaryDirectory(dir=os.environ.get("TMPDIR", "/tmp")) as tmp:
@@ -85,6 +90,9 @@ def _scenario(world: str, duration: float, threads: int, repeats: int) -> dict:
 
     s = runs[0]
     return {
+        "bench": "sim_scenario",
+        "world": world,
+        "scale": scale,
         "sensor": cfg.resolved().sensor,
         "simulated_s": round(s.duration, 3),
         "seconds_per_simulated_second": round(median(lambda r: r.seconds_localization / r.duration), 3),
@@ -107,20 +115,26 @@ def main() -> None:
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--duration", type=float, default=10.0, help="simulated seconds per scenario")
+    parser.add_argument("--quick", action="store_true", help="small worlds, 1 s, one repeat: checks that it runs")
     args = parser.parse_args()
+    scale, sweeps = 1.0, 30
+    if args.quick:
+        scale, sweeps, args.repeats, args.duration = 0.2, 2, 1, 1.0
     reuse_large_buffers()  # as `gpm simulate` does
-    out = {"threads": args.threads, "repeats": args.repeats}
-    out.update(_raycast(args.threads, args.repeats, sweeps=30))
-    out["courtyard_livox"] = _scenario("courtyard", args.duration, args.threads, args.repeats)
-    out["urban_hdl32"] = _scenario("urban", args.duration, args.threads, args.repeats)
-    out["peak_rss_mb"] = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)
-    out["hardware"] = {
+    rows = [_raycast(args.threads, args.repeats, sweeps, scale)]
+    rows.append(_scenario("courtyard", args.duration, args.threads, args.repeats, scale))
+    rows.append(_scenario("urban", args.duration, args.threads, args.repeats, scale))
+    machine = {
+        "threads": args.threads,
+        "repeats": args.repeats,
+        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
         "cpu": cpu_model(),
         "cores": os.cpu_count(),
         "load_average_1min_at_end": round(os.getloadavg()[0], 2),  # the CPU may be shared
         "python": platform.python_version(),
     }
-    print(json.dumps(out, indent=2))
+    for row in rows:
+        print(json.dumps({**row, **machine}), flush=True)
 
 
 if __name__ == "__main__":

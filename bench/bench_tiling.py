@@ -10,7 +10,9 @@ By default everything goes to the repo's file system (a temporary directory unde
 user's tiles would go; --tmp-dir /dev/shm times the tiler without a disk. Each repeat writes a fresh
 directory and all are deleted at the end: deleting tens of thousands of files right before creating
 as many slows the creation down on some file systems (ext4 without a journal scans past inodes
-deleted in the last minutes), which would time the benchmark's own clean-up, not the tiler."""
+deleted in the last minutes), which would time the benchmark's own clean-up, not the tiler.
+
+--quick: a synthetic map of 100,000 points, one repeat (checks that it runs without the real data)."""
 
 from __future__ import annotations
 
@@ -24,10 +26,11 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 from file_creation_floor import create_files
 from hardware import cpu_model
 
-from grid_puzzle_localization.pcd import merge_pcds
+from grid_puzzle_localization.pcd import merge_pcds, write_pcd, xyz_records
 from grid_puzzle_localization.tiling import load_tile_index
 from grid_puzzle_localization.util.iteration import exit_code, zip_equal
 
@@ -49,6 +52,15 @@ def run_child(args: list[str]) -> tuple[float, float, dict]:
     return seconds, usage.ru_maxrss / 1024.0, json.loads(output)  # ru_maxrss is in KiB on Linux
 
 
+def synthetic_map(path: Path) -> int:
+    """100,000 seeded points over 60 m x 60 m (900 tiles of 2 m) as one PCD, for --quick; their count."""
+    rng = np.random.default_rng(0)
+    n = 100_000
+    points = np.column_stack([rng.uniform(0.0, 60.0, (n, 2)), rng.uniform(0.0, 3.0, n)])
+    write_pcd(path, xyz_records(points))
+    return n
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--repeats", type=int, default=5)
@@ -61,15 +73,18 @@ def main() -> int:
         default=ROOT / "build",
         help="where the merged map and the tiles go (default: build/ in the repo, i.e. the repo's file system)",
     )
+    parser.add_argument("--quick", action="store_true", help="synthetic small map, one repeat: checks that it runs")
     args = parser.parse_args()
     inputs = sorted(CAMPUS_TILES.glob("*.pcd"))
-    if not inputs:
-        raise SystemExit(f"bench_tiling: no campus tiles in {CAMPUS_TILES}")
+    if args.quick:
+        args.repeats = 1
+    elif not inputs:
+        raise SystemExit(f"bench_tiling: no campus tiles in {CAMPUS_TILES} (the real map); --quick runs without it")
     args.tmp_dir.mkdir(parents=True, exist_ok=True)
     load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="bench_tiling_", dir=args.tmp_dir) as tmp:
         campus = Path(tmp) / "campus.pcd"
-        points_in = merge_pcds(inputs, campus)
+        points_in = synthetic_map(campus) if args.quick else merge_pcds(inputs, campus)
         seconds, rss, phases, floor = [], [], [], []
         command = [sys.executable, "-c", GPM, "tile", "--json", "--grid-size", f"{args.grid_size:g}"]
         for k in range(args.repeats):
@@ -96,6 +111,7 @@ def main() -> int:
             json.dumps(
                 {
                     "bench": "tiling",
+                    "map": "synthetic (--quick)" if args.quick else "nova_utd campus",
                     "grid_size_m": args.grid_size,
                     "memory_mb": args.memory_mb,
                     "points_in": points_in,

@@ -1,14 +1,15 @@
 #!/usr/bin/env bash
 # Runs every test (gtest binaries, pytest, rostest) from a shell that sourced the devel space, then
-# judges the run by the result files, not by exit codes alone. Usage: run_tests.sh [gtest|pytest|rostest ...]
+# judges the run by the result files, not by exit codes alone. Usage: run_tests.sh [gtest|pytest|rostest|bench ...]
+# bench: every `make bench-*` in its quick mode (test/bench), so a broken benchmark fails the run.
 set -o pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
 source "$gpl_ws/devel/setup.bash"
 results="$gpl_root/test_results"
 rm -rf "$results"
-mkdir -p "$results/gtest" "$results/pytest" "$results/rostest"
+mkdir -p "$results/gtest" "$results/pytest" "$results/rostest" "$results/bench"
 suites=("$@")
-((${#suites[@]})) || suites=(gtest pytest rostest)
+((${#suites[@]})) || suites=(gtest pytest rostest bench)
 status=0
 
 run_gtest() {
@@ -28,6 +29,11 @@ run_pytest() {
   local rc=$?
   # 5 = no tests collected: the result check below reports that as a failure with a reason.
   ((rc == 0 || rc == 5)) || status=1
+}
+
+run_bench() {
+  echo "== bench (quick modes)"
+  (cd "$gpl_root" && python3 -m pytest -q test/bench --junitxml="$results/bench/bench.xml") || status=1
 }
 
 run_rostest() {
