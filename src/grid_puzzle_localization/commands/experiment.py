@@ -10,7 +10,14 @@ from pathlib import Path
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation.storage import storage_figures
-from grid_puzzle_localization.experiment.config import MODES, PRESETS, ExperimentConfig, NodeRoles, WindowPreset
+from grid_puzzle_localization.experiment.config import (
+    DEFAULT_MODES,
+    MODES,
+    PRESETS,
+    ExperimentConfig,
+    NodeRoles,
+    WindowPreset,
+)
 from grid_puzzle_localization.experiment.maps import ensure_blocks, ensure_submaps, ensure_tiles
 from grid_puzzle_localization.experiment.runner import run_experiment
 from grid_puzzle_localization.experiment.scenario import read_scenario
@@ -30,22 +37,37 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--block-size", type=float, default=ExperimentConfig.block_size_m, help="block size S [m] of built block maps"
     )
-    parser.add_argument("--modes", nargs="+", default=["global", "grid_puzzle"], choices=MODES, help="modes to run")
     parser.add_argument(
-        "--preset", default="demo", choices=sorted(PRESETS), help="window preset n, k, s (default demo)"
+        "--modes", nargs="+", default=list(DEFAULT_MODES), choices=MODES, help="modes to run (default: %(default)s)"
     )
+    parser.add_argument(
+        "--preset", default=ExperimentConfig.preset, choices=sorted(PRESETS),
+        help="window preset n, k, s (default %(default)s)",
+    )  # fmt: skip
     parser.add_argument("--n", type=int, help="window half side [tiles] (overrides the preset)")
     parser.add_argument("--k", type=int, help="window heading extension [tiles] (overrides the preset)")
     parser.add_argument("--grid-size", type=float, help="tile side s [m] (overrides the preset)")
-    parser.add_argument("--rate", type=float, default=1.0, help="bag playback speed, times real time (default 1)")
-    parser.add_argument("--interval", type=float, default=0.5, help="monitor sampling period [s] (default 0.5)")
-    parser.add_argument("--ndt-threads", type=int, default=0, help="NDT threads, 0 = all cores (default 0)")
+    parser.add_argument(
+        "--rate", type=float, default=ExperimentConfig.rate,
+        help="bag playback speed, times real time (default %(default)s)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--interval", type=float, default=ExperimentConfig.monitor_interval_s,
+        help="monitor sampling period [s] (default %(default)s)",
+    )  # fmt: skip
+    parser.add_argument("--ndt-threads", type=int, help="NDT threads, 0 = all cores (default: the localizer's)")
     parser.add_argument(
         "--initial-pose", type=float, nargs=6, metavar=("X", "Y", "Z", "ROLL", "PITCH", "YAW"),
         help="start pose [m, rad] (default: the first ground-truth pose)",
     )  # fmt: skip
-    parser.add_argument("--settle", type=float, default=2.0, help="wait after start-up and after playback [s]")
-    parser.add_argument("--max-time-diff", type=float, default=0.05, help="pose association tolerance [s]")
+    parser.add_argument(
+        "--settle", type=float, default=ExperimentConfig.settle_s,
+        help="wait after start-up and after playback [s] (default %(default)s)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--max-time-diff", type=float, default=ExperimentConfig.max_time_diff_s,
+        help="pose association tolerance [s] (default %(default)s)",
+    )  # fmt: skip
     parser.add_argument("--localizer-node", default=NodeRoles.localizer, help="node whose process runs the NDT")
     parser.add_argument("--provider-node", default=NodeRoles.map_provider, help="node of the tile provider")
     parser.add_argument("--block-server-node", default=NodeRoles.block_server, help="node of the block map server")

@@ -40,6 +40,9 @@ class NodeRoles:
     recorder: str = "/trajectory_recorder"
 
 
+DEFAULT_MODES = ("global", "grid_puzzle")
+
+
 @dataclass
 class ExperimentConfig:
     out_dir: Path
@@ -49,7 +52,7 @@ class ExperimentConfig:
     tiles: Path | None = None  # None: cut from global_map into out_dir/tiles
     blocks: Path | None = None  # block map directory from `gpm blocks`; None: built from global_map along ground_truth
     block_size_m: float = BlockConfig.block_size  # S of the blocks built when blocks is None
-    modes: list[str] = field(default_factory=lambda: ["global", "grid_puzzle"])
+    modes: list[str] = field(default_factory=lambda: list(DEFAULT_MODES))
     preset: str = "demo"
     window: WindowPreset = PRESETS["demo"]
     rate: float = 1.0  # bag playback speed, times real time
@@ -57,7 +60,7 @@ class ExperimentConfig:
     max_time_diff_s: float = 0.05  # pose association tolerance
     startup_timeout_s: float = 60.0
     settle_s: float = 2.0  # after the nodes are up, and after the bag ends
-    ndt_threads: int = 0  # 0 = all cores
+    ndt_threads: int | None = None  # OpenMP threads of the NDT, 0 = all cores; None: the localizer's default
     initial_pose: list[float] | None = None  # x y z roll pitch yaw [m, rad]; None: first ground-truth pose
     roles: NodeRoles = field(default_factory=NodeRoles)
     launch_file: str = "localization.launch"  # of this package, or an absolute path
@@ -81,6 +84,8 @@ class ExperimentConfig:
             raise UserError(
                 "block_map mode needs --blocks DIR (from `gpm blocks`), or ground truth to build them from the map"
             )
+        if self.ndt_threads is not None and self.ndt_threads < 0:
+            raise UserError(f"--ndt-threads must be >= 0, 0 = all cores (got {self.ndt_threads})")
         if not self.block_size_m > 0:
             raise UserError(f"--block-size must be > 0 m (got {self.block_size_m})")
         if self.initial_pose is None and self.ground_truth is None:

@@ -58,11 +58,12 @@ def launch_args(cfg: ExperimentConfig, mode: str, tiles: Path | None, initial_po
         "mode": mode,
         "use_sim_time": "true",
         "initial_pose": "[" + ", ".join(f"{v:.9g}" for v in initial_pose) + "]",
-        "ndt_threads": cfg.ndt_threads,
         "map": cfg.global_map.resolve(),
         "n": cfg.window.n,
         "k": cfg.window.k,
     }
+    if cfg.ndt_threads is not None:  # else the localizer's own default
+        args["ndt_threads"] = cfg.ndt_threads
     if tiles is not None:
         args["tiles"] = tiles.resolve()
     if mode == "block_map":
