@@ -55,9 +55,26 @@ int appendFile(int fd, const char* path) {
   return error;
 }
 
+/// Binary PCD header of a tile of n points: before_width, n, before_points, n, after_points.
+struct TileHeader {
+  const char* before_width;
+  const char* before_points;
+  const char* after_points;
+};
+
+/// Where the buffered points of the tiles are (see gpm_write_tiles).
+struct TileRows {
+  const std::int64_t* begin;
+  const std::int64_t* end;
+  const std::int64_t* chunk;
+  const std::int64_t* first;
+  const std::int64_t* last;
+  const std::uint8_t* const* chunks;
+};
+
 class TileFileWriter {
  public:
-  TileFileWriter(int dir_fd, const GpmTileHeader& header, const GpmTileRows& rows)
+  TileFileWriter(int dir_fd, const TileHeader& header, const TileRows& rows)
       : dir_fd_(dir_fd), header_(header), rows_(rows) {}
 
   /// Writes tile k; 0 or an errno, with the path concerned in *path.
@@ -98,8 +115,8 @@ class TileFileWriter {
   }
 
   int dir_fd_;
-  GpmTileHeader header_;
-  GpmTileRows rows_;
+  TileHeader header_;
+  TileRows rows_;
   std::string head_;        // reused from tile to tile
   std::vector<iovec> iov_;  // likewise
 };
@@ -107,9 +124,12 @@ class TileFileWriter {
 }  // namespace
 
 extern "C" int gpm_write_tiles(int dir_fd, std::int64_t tiles, const char* names, const char* spills,
-                               const std::int64_t* counts, const GpmTileHeader* header, const GpmTileRows* rows,
-                               const char** failed_path) {
-  TileFileWriter writer(dir_fd, *header, *rows);
+                               const std::int64_t* counts, const char* before_width, const char* before_points,
+                               const char* after_points, const std::int64_t* begin, const std::int64_t* end,
+                               const std::int64_t* chunk, const std::int64_t* first, const std::int64_t* last,
+                               const std::uint8_t* const* chunks, const char** failed_path) {
+  TileFileWriter writer(dir_fd, TileHeader{before_width, before_points, after_points},
+                        TileRows{begin, end, chunk, first, last, chunks});
   for (std::int64_t k = 0; k < tiles; ++k) {
     const int error = writer.write(k, names, spills, counts[k], failed_path);
     if (error != 0) return error;

@@ -49,9 +49,7 @@ class TileFileWriter:
         self.directory = directory
         self._tiles = tiles
         self._counts = np.ascontiguousarray(tiles.stats["count"])
-        self._header = native.TileHeaderStruct(
-            *(text.encode() for text in (header.before_width, header.before_points, header.after_points))
-        )
+        self._header = [text.encode() for text in (header.before_width, header.before_points, header.after_points)]
         self._row_arrays = [
             np.ascontiguousarray(a, dtype=np.int64)
             for a in (tiles.row_begin, tiles.row_end, tiles.row_chunk, tiles.row_first, tiles.row_last)
@@ -64,7 +62,6 @@ class TileFileWriter:
         begin, end, chunk, first, last = (a.ctypes.data for a in self._row_arrays)
         offset = which.start * 8  # int64 per tile
         chunks = self._chunk_addresses.ctypes.data
-        rows = native.TileRowsStruct(begin + offset, end + offset, chunk, first, last, chunks)
         spills = self._tiles.spills[which.start : which.stop]
         failed_path = ctypes.c_char_p()
         error = native.library().gpm_write_tiles(
@@ -73,8 +70,13 @@ class TileFileWriter:
             native.c_strings(names),
             native.c_strings(["" if spill is None else str(spill) for spill in spills]),
             self._counts.ctypes.data + offset,
-            ctypes.byref(self._header),
-            ctypes.byref(rows),
+            *self._header,
+            begin + offset,
+            end + offset,
+            chunk,
+            first,
+            last,
+            chunks,
             ctypes.byref(failed_path),
         )
         if error:
