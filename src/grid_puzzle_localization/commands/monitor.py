@@ -11,7 +11,7 @@ import sys
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.monitor.log import write_csv
-from grid_puzzle_localization.monitor.sampler import Monitor, Target
+from grid_puzzle_localization.monitor.sampler import DEFAULT_INTERVAL_S, Monitor, Target
 from grid_puzzle_localization.monitor.stats import summarize
 from grid_puzzle_localization.util.atomic import atomic_write
 
@@ -19,7 +19,9 @@ from grid_puzzle_localization.util.atomic import atomic_write
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("nodes", nargs="*", metavar="NODE", help="ROS node names, e.g. /ndt_localizer")
     parser.add_argument("--pid", type=int, action="append", default=[], help="a process id (repeatable)")
-    parser.add_argument("--interval", type=float, default=1.0, help="sampling period [s] (default 1.0)")
+    parser.add_argument(
+        "--interval", type=float, default=DEFAULT_INTERVAL_S, help="sampling period [s] (default %(default)s)"
+    )
     parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds (default: Ctrl-C)")
     parser.add_argument("--csv", default=None, help="write the samples to this CSV file")
     parser.add_argument("--json", default=None, help="write the summary to this JSON file (it is always printed)")

@@ -19,24 +19,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--sensor", help=f"LiDAR model: {', '.join(SENSORS)} (default: livox for courtyard, hdl32 for urban)"
     )
     parser.add_argument(
-        "--seed", type=int, default=0, help="random seed; the same seed gives identical files (default 0)"
-    )
+        "--seed", type=int, default=ScenarioConfig.seed,
+        help="random seed; the same seed gives identical files (default %(default)s)",
+    )  # fmt: skip
     parser.add_argument(
-        "--scale", type=float, default=1.0, help="world extent and route length factor, 0.2-1 (default 1)"
-    )
+        "--scale", type=float, default=ScenarioConfig.scale,
+        help="world extent and route length factor, 0.2-1 (default %(default)s)",
+    )  # fmt: skip
     parser.add_argument("--duration", type=float, help="seconds of the localization run (default: the whole route)")
     parser.add_argument(
         "--map-density", type=float, help="voxel size of the prior map [m] (default 0.05 courtyard, 0.1 urban)"
     )
-    parser.add_argument("--start-time", type=float, default=1.7e9, help="bag time of the first sample [s since epoch]")
+    parser.add_argument(
+        "--start-time", type=float, default=ScenarioConfig.start_time,
+        help="bag time of the first sample [s since epoch] (default %(default)s)",
+    )  # fmt: skip
     parser.add_argument(
         "--movers",
         type=int,
         help="moving pedestrians/cars in the scans, not in the map (default 12 x scale / 20 x scale in urban)",
     )
     parser.add_argument(
-        "--threads", type=int, default=2, help="sweep worker threads (default 2; same output for any count)"
-    )
+        "--threads", type=int, default=ScenarioConfig.threads,
+        help="sweep worker threads (default %(default)s; same output for any count)",
+    )  # fmt: skip
     parser.add_argument("--force", action="store_true", help="replace a non-empty output directory")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 

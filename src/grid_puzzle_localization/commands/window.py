@@ -18,7 +18,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--grid-size", type=float, help="tile side s [m] (read from the index of --tiles when omitted)")
     parser.add_argument("--n", type=int, default=WindowConfig.n, help="half side of the default square [tiles]")
     parser.add_argument("--k", type=int, default=WindowConfig.k, help="extension toward the heading [tiles]")
-    parser.add_argument("--preset", default="", help="urban or courtyard: the paper's n and k (overrides --n/--k)")
+    parser.add_argument(
+        "--preset", default=WindowConfig.preset, help="urban or courtyard: the paper's n and k (overrides --n/--k)"
+    )
     parser.add_argument("--x", type=float, required=True, help="agent position x [m]")
     parser.add_argument("--y", type=float, required=True, help="agent position y [m]")
     parser.add_argument("--prev-x", type=float, help="previous position x [m] (heading = direction of travel)")

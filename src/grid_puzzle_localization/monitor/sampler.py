@@ -107,13 +107,16 @@ class _Tracker:
         return None
 
 
+DEFAULT_INTERVAL_S = 1.0  # [s] between samples
+
+
 class Monitor:
     """Samples ``targets`` every ``interval`` seconds into a :class:`MonitorLog`.
 
     Use :meth:`run` to sample in the calling thread, or :meth:`start` / :meth:`stop` to sample in a
     background thread (what the experiment runner does)."""
 
-    def __init__(self, targets: Sequence[Target], interval: float = 1.0):
+    def __init__(self, targets: Sequence[Target], interval: float = DEFAULT_INTERVAL_S):
         names = [t.name for t in targets]
         if len(set(names)) != len(names):
             raise UserError(f"monitor targets must have distinct names (got {names})")
