@@ -385,6 +385,27 @@ def test_index_text_is_what_json_would_write(tmp_path):
     assert loaded.tiles == as_entries
 
 
+@settings(max_examples=500, deadline=None)
+@given(
+    st.lists(st.floats(allow_nan=False, allow_infinity=False), min_size=6, max_size=6),
+    st.integers(-(2**50), 2**50),
+    st.floats(1e-3, 1e4),
+)
+def test_index_floats_are_written_as_python_repr(bounds, i, s):
+    table = TileTable([i], [-i], ["a_b.pcd"], [3], [99], [[v] for v in bounds[:3]], [[v] for v in bounds[3:]])
+    expected = {
+        "key": [i, -i],
+        "stem": "a_b",
+        "file": "a_b.pcd",
+        "center": [(i + 0.5) * s, (-i + 0.5) * s],
+        "points": 3,
+        "bounds": {"min": bounds[:3], "max": bounds[3:]},
+        "bytes": 99,
+        "data_bytes": 36,
+    }
+    assert b"".join(table.json_parts(s, 12)).decode() == json.dumps([expected], separators=(",", ":"))
+
+
 @pytest.mark.parametrize("tiles", [0, 1, JSON_BATCH, 2 * JSON_BATCH + 5])
 def test_index_text_in_parts_is_what_json_would_write(tiles):
     rng = np.random.default_rng(tiles)

@@ -123,24 +123,20 @@ class TileTable:
 
     def json_parts(self, grid_size: float, record_bytes: int) -> Iterator[bytes]:
         """The tiles as a compact JSON array, in parts of up to JSON_BATCH tiles that join into the whole
-        text, so that it is never held whole (the index of 1e6 tiles is hundreds of MB)."""
+        text, so that it is never held whole (the index of 1e6 tiles is hundreds of MB). The text is what
+        json.dumps writes (floats as repr; bounds are finite, the tiler drops non-finite points; file names
+        need no escaping: grid.tile_stem writes digits, '-', '.' and '_' only), formatted per tile with one
+        f-string, several times faster than building the dicts for json.dumps."""
         rows = self.rows(grid_size, record_bytes)
         yield b"["
         for start in range(0, len(self), JSON_BATCH):
-            batch = [
-                {
-                    "key": [i, j],
-                    "stem": stem,
-                    "file": f,
-                    "center": [cx, cy],
-                    "points": n,
-                    "bounds": {"min": [x0, y0, z0], "max": [x1, y1, z1]},
-                    "bytes": b,
-                    "data_bytes": data,
-                }
+            text = ",".join(
+                f'{{"key":[{i},{j}],"stem":"{stem}","file":"{f}","center":[{cx!r},{cy!r}],"points":{n},'
+                f'"bounds":{{"min":[{x0!r},{y0!r},{z0!r}],"max":[{x1!r},{y1!r},{z1!r}]}},'
+                f'"bytes":{b},"data_bytes":{data}}}'
                 for i, j, stem, f, cx, cy, n, x0, y0, z0, x1, y1, z1, b, data in itertools.islice(rows, JSON_BATCH)
-            ]
-            yield (b"," if start else b"") + json.dumps(batch, separators=(",", ":"))[1:-1].encode()
+            )
+            yield (b"," if start else b"") + text.encode()
         yield b"]"
 
 
