@@ -21,6 +21,7 @@ const char* kUsage =
     "usage: global_localize --map MAP.pcd [--map MAP2.pcd ...] --scan SCAN.pcd [--center X Y] [--size S]\n"
     "                       [--yaw-center A] [--yaw-range A] [--threads N] [--plain] [--map-voxel V]\n"
     "       global_localize --map MAP.pcd [...] --requests FILE [--threads N] [--plain] [--map-voxel V]\n"
+    "       global_localize --print-config\n"
     "Finds the pose of SCAN (x y z PCD, base frame) on the map (x y z PCD files, map frame) and prints JSON:\n"
     "x y z [m], roll pitch yaw [rad] (R = Rz(yaw) Ry(pitch) Rx(roll)), score, runner_up_score, confidence, seconds.\n"
     "  --center       centre of the searched square [m] (default: centre of the map's structure)\n"
@@ -31,6 +32,7 @@ const char* kUsage =
     "  --map-voxel    downsampling leaf of the map [m], 0 = off (default 0.1)\n"
     "  --requests     one search per line: SCAN.pcd CENTER_X CENTER_Y SIZE YAW_CENTER YAW_RANGE; one JSON line\n"
     "                 each, with the map loaded once\n"
+    "  --print-config prints the search's defaults (max_range [m]: how far around the square the map is needed)\n"
     "Exit status: 0 found, 1 nothing acceptable (the reason is printed), 2 bad input.\n";
 
 struct UsageError : std::runtime_error {
@@ -69,6 +71,10 @@ Args parse(int argc, char** argv) {
     };
     if (opt == "-h" || opt == "--help") {
       std::cout << kUsage;
+      std::exit(0);
+    } else if (opt == "--print-config") {
+      std::cout << "{\"max_range\": " << a.config.max_range << ", \"resolution\": " << a.config.resolution
+                << ", \"size\": " << a.request.size << "}" << std::endl;
       std::exit(0);
     } else if (opt == "--map") {
       a.maps.push_back(value());
