@@ -84,12 +84,15 @@ def errors(answer: dict, truth: np.ndarray) -> tuple[float, float]:
     return float(np.linalg.norm(delta[:3, 3])), angle
 
 
-def search(program: Path, map_pcd: Path, trials: list[Trial], size: float, threads: int, plain: bool) -> list[dict]:
+def search(
+    program: Path, map_pcd: Path, trials: list[Trial], size: float, threads: int, plain: bool, overrides: list[str]
+) -> list[dict]:
     with tempfile.NamedTemporaryFile("w", suffix=".txt") as requests:
         for t in trials:
             requests.write(f"{t.scan} {t.center[0]!r} {t.center[1]!r} {size!r} 0 {2 * math.pi!r}\n")
         requests.flush()
         cmd = [str(program), "--map", str(map_pcd), "--requests", requests.name, "--threads", str(threads)]
+        cmd += [arg for o in overrides for arg in ("--set", o)]
         out = subprocess.run(cmd + (["--plain"] if plain else []), check=True, capture_output=True, text=True)
     return [json.loads(line) for line in out.stdout.splitlines()]
 
@@ -214,6 +217,7 @@ def main() -> int:
     parser.add_argument("--offset", type=float, default=15.0, help="largest distance of the centre from the truth [m]")
     parser.add_argument("--threads", type=int, default=2, help="OpenMP threads (default 2)")
     parser.add_argument("--modes", default="s0,plain,large", help="comma-separated: s0, plain, large")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=V", help="search parameter override")
     parser.add_argument("--per-trial", action="store_true", help="also print one JSON line per trial")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--exe", type=Path, default=None, help="global_localize program (default: the workspace's)")
@@ -242,13 +246,13 @@ def main() -> int:
                 return 2
             for mode in chosen:
                 size, plain = modes[mode]
-                answers = search(program, map_pcd, data, size, args.threads, plain)
+                answers = search(program, map_pcd, data, size, args.threads, plain, args.set)
                 if args.per_trial:
                     for t, a in zip(data, answers):
                         e = errors(a, t.truth)
                         print(json.dumps({"dataset": dataset, "mode": mode, "error_m": e[0], "error_deg": e[1], **a}))
                 row = summary(dataset, mode, size, args.threads, data, answers)
-                row.update(hardware, load_average_1min=os.getloadavg()[0])
+                row.update(hardware, load_average_1min=os.getloadavg()[0], overrides=args.set)
                 print(json.dumps(row), flush=True)
     return 0
 

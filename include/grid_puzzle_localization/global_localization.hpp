@@ -23,10 +23,13 @@ struct GlobalLocalizationConfig {
   double resolution = 0.5;
   /// [m] edge of the cells in which the lowest point is taken as the ground (map and scan alike).
   double ground_cell = 2.0;
-  /// [m] only points this far above their cell's ground count as structure (walls, poles, trees).
-  double min_height = 0.5;
-  /// [m] ... and at most this far above it.
-  double max_height = 10.0;
+  /// [m] edges of the height bands above the ground (strictly increasing, >= 2 values): a structure point of the
+  /// scan is matched only against map structure of its own band, which tells a hedge from a wall behind it. Points
+  /// below the first edge (the ground) or above the last one are not used.
+  std::vector<double> height_bands = {0.5, 1.5, 3.0, 6.0, 12.0};
+  /// [m] map structure this close to a band counts in it too (the ground under the map and under the scan are
+  /// estimated from different points), >= 0.
+  double band_overlap = 0.3;
   /// [m] scan points farther than this (horizontally) from the sensor are not used by the search.
   double max_range = 40.0;
   /// Structure points of the scan used by the search after the 2D thinning (evenly chosen), >= 10.
@@ -34,7 +37,7 @@ struct GlobalLocalizationConfig {
   /// A scan with fewer structure points than this is refused ("too few points"), >= 3.
   int min_scan_points = 30;
   /// [m] spread of the likelihood around each occupied map cell (0 = plain occupancy).
-  double blur_sigma = 0.5;
+  double blur_sigma = 0.25;
   /// [rad] yaw step; 0 = automatic, resolution / (the farthest scan point used), which moves it by <= 1 cell.
   double yaw_step = 0.0;
   /// Pyramid levels above the finest one, 1..12; a coarse cell covers 2^levels fine cells.
@@ -54,6 +57,14 @@ struct GlobalLocalizationConfig {
   double runner_up_distance = 2.0;
   /// [rad] ... or in yaw.
   double runner_up_yaw = 0.35;
+  /// Distinct candidates (runner_up_distance / runner_up_yaw apart) within max_runner_up_ratio of the best that
+  /// are refined by NDT, >= 1: candidates that converge to one pose are one answer, so the slope of one peak is
+  /// not taken for a second place. More distinct candidates than this make the answer ambiguous.
+  int refine_candidates = 4;
+  /// [m] refined poses closer than this ...
+  double same_pose_distance = 0.5;
+  /// [rad] ... and turned less than this are the same answer.
+  double same_pose_yaw = 0.035;
   /// NDT used to refine the winner (its resolution is also the voxel size of the target built from the map
   /// points when no target is given to setMap).
   NdtConfig ndt;
@@ -84,8 +95,9 @@ struct GlobalLocalizationResult {
   /// Search score of the winner: likelihood-weighted fraction of the scan's structure points on map structure,
   /// in [0, 1].
   double score = 0.0;
-  /// Upper bound of the best score of a pose far (runner_up_distance / runner_up_yaw) from the winner: exact
-  /// when it is >= max_runner_up_ratio * score, otherwise that product (the search proved nothing far is above).
+  /// Search score of the best candidate that is another answer than the winner: it refines to another pose, or it
+  /// was not refined (beyond refine_candidates). Without one, max_runner_up_ratio * score: an upper bound, since
+  /// the search proved that no other place scores more.
   double runner_up_score = 0.0;
   /// 1 - runner_up_score / score, in [0, 1]; 0 = two places explain the scan equally well.
   double confidence = 0.0;

@@ -11,6 +11,7 @@
 
 #include "grid_puzzle_localization/bbs_search.hpp"
 #include "grid_puzzle_localization/preprocess.hpp"
+#include "structure_cells.hpp"
 
 namespace grid_puzzle_localization {
 
@@ -20,58 +21,6 @@ constexpr double kTwoPi = 2.0 * 3.14159265358979323846;
 /// [m] radius around a position whose ground cells give its ground height.
 constexpr double kGroundRadius = 8.0;
 
-std::int64_t cellKey(std::int64_t x, std::int64_t y) { return (x << 32) ^ (y & 0xffffffffLL); }
-
-/// Lowest z per ground cell (x-y cells of edge `cell`).
-using GroundCells = std::unordered_map<std::int64_t, double>;
-
-GroundCells groundCells(const std::vector<Eigen::Vector3d>& points, double cell) {
-  GroundCells ground;
-  for (const Eigen::Vector3d& p : points) {
-    const std::int64_t key = cellKey(static_cast<std::int64_t>(std::floor(p.x() / cell)),
-                                     static_cast<std::int64_t>(std::floor(p.y() / cell)));
-    auto it = ground.emplace(key, p.z()).first;
-    it->second = std::min(it->second, p.z());
-  }
-  return ground;
-}
-
-double groundOf(const GroundCells& ground, const Eigen::Vector3d& p, double cell) {
-  return ground.at(cellKey(static_cast<std::int64_t>(std::floor(p.x() / cell)),
-                           static_cast<std::int64_t>(std::floor(p.y() / cell))));
-}
-
-/// The points standing min_height..max_height above the ground of their cell (walls, poles, trunks).
-std::vector<Eigen::Vector3d> structurePoints(const std::vector<Eigen::Vector3d>& points, const GroundCells& ground,
-                                             const GlobalLocalizationConfig& cfg) {
-  std::vector<Eigen::Vector3d> out;
-  for (const Eigen::Vector3d& p : points) {
-    const double h = p.z() - groundOf(ground, p, cfg.ground_cell);
-    if (h >= cfg.min_height && h <= cfg.max_height) out.push_back(p);
-  }
-  return out;
-}
-
-/// Median of the ground cells whose centre lies within kGroundRadius of (x, y); false when there is none.
-bool groundHeight(const GroundCells& ground, double cell, double x, double y, double* height) {
-  std::vector<double> near;
-  const int r = static_cast<int>(std::ceil(kGroundRadius / cell));
-  const std::int64_t cx = static_cast<std::int64_t>(std::floor(x / cell));
-  const std::int64_t cy = static_cast<std::int64_t>(std::floor(y / cell));
-  for (int dy = -r; dy <= r; ++dy)
-    for (int dx = -r; dx <= r; ++dx) {
-      const double ex = (static_cast<double>(cx + dx) + 0.5) * cell - x;
-      const double ey = (static_cast<double>(cy + dy) + 0.5) * cell - y;
-      if (ex * ex + ey * ey > kGroundRadius * kGroundRadius) continue;
-      const auto it = ground.find(cellKey(cx + dx, cy + dy));
-      if (it != ground.end()) near.push_back(it->second);
-    }
-  if (near.empty()) return false;
-  std::nth_element(near.begin(), near.begin() + near.size() / 2, near.end());
-  *height = near[near.size() / 2];
-  return true;
-}
-
 double wrapAngle(double a) { return std::remainder(a, kTwoPi); }
 
 GlobalLocalizationResult refused(GlobalLocalizationResult result, const std::string& reason,
@@ -80,6 +29,102 @@ GlobalLocalizationResult refused(GlobalLocalizationResult result, const std::str
   result.reason = reason;
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return result;
+}
+
+/// Index of the height band holding `height` (band b is [edges[b], edges[b + 1])), -1 when outside all.
+int bandOf(double height, const std::vector<double>& edges) {
+  const auto it = std::upper_bound(edges.begin(), edges.end(), height);
+  if (it == edges.begin() || it == edges.end()) return -1;
+  return static_cast<int>(it - edges.begin()) - 1;
+}
+
+/// The scan's structure as the search matches it: x-y in the levelled base frame and height band, one point per
+/// search cell and band (the first seen), at most max_scan_points of them (evenly chosen).
+struct ScanStructure {
+  std::vector<Eigen::Vector2d> xy;
+  std::vector<int> band;
+  double reach = 0.0;  ///< [m] farthest point from the sensor
+};
+
+ScanStructure scanStructure(const std::vector<StructurePoint>& points, const GlobalLocalizationConfig& cfg) {
+  ScanStructure all;
+  std::unordered_set<std::int64_t> seen;
+  for (const StructurePoint& p : points) {
+    const int band = bandOf(p.height, cfg.height_bands);
+    if (band < 0) continue;
+    const auto cx = static_cast<std::int64_t>(std::floor(p.xy.x() / cfg.resolution));
+    const auto cy = static_cast<std::int64_t>(std::floor(p.xy.y() / cfg.resolution));
+    if (!seen.insert(cellKey(cx * 16 + band, cy)).second) continue;
+    all.xy.push_back(p.xy);
+    all.band.push_back(band);
+  }
+  ScanStructure out;
+  const std::size_t n = std::min(all.xy.size(), static_cast<std::size_t>(cfg.max_scan_points));
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::size_t k = i * all.xy.size() / n;
+    out.xy.push_back(all.xy[k]);
+    out.band.push_back(all.band[k]);
+    out.reach = std::max(out.reach, all.xy[k].norm());
+  }
+  return out;
+}
+
+/// The likelihood grids of the map's structure around a search square, one per height band, side by side in one
+/// grid: band b occupies columns [b * stride, b * stride + side). The gap between them is wider than the coarsest
+/// pyramid cell, so no coarse cell mixes two bands.
+struct BandGrids {
+  int side = 0;                      ///< cells per band along x and y
+  int stride = 0;                    ///< columns from one band to the next
+  double x0 = 0, y0 = 0;             ///< [m] map position of cell (0, 0)'s corner
+  std::vector<std::uint8_t> values;  ///< row-major, width bands * stride
+  std::size_t occupied = 0;          ///< occupied cells, all bands
+};
+
+BandGrids bandGrids(const std::vector<StructurePoint>& map, const GlobalLocalizationConfig& cfg, double x0, double y0,
+                    int side) {
+  const double r = cfg.resolution;
+  const int bands = static_cast<int>(cfg.height_bands.size()) - 1;
+  BandGrids g;
+  g.side = side;
+  g.stride = side + (1 << cfg.levels) + 1;
+  g.x0 = x0;
+  g.y0 = y0;
+  const int width = bands * g.stride;
+  g.values.assign(static_cast<std::size_t>(width) * side, 0);
+  std::vector<std::uint8_t> occupied(g.values.size(), 0);
+  std::vector<Eigen::Vector2i> cells;
+  for (const StructurePoint& m : map) {
+    const int cx = static_cast<int>(std::floor((m.xy.x() - x0) / r));
+    const int cy = static_cast<int>(std::floor((m.xy.y() - y0) / r));
+    if (cx < 0 || cy < 0 || cx >= side || cy >= side) continue;
+    for (int b = 0; b < bands; ++b) {
+      if (m.height < cfg.height_bands[b] - cfg.band_overlap || m.height >= cfg.height_bands[b + 1] + cfg.band_overlap)
+        continue;
+      std::uint8_t& o = occupied[static_cast<std::size_t>(cy) * width + b * g.stride + cx];
+      if (!o) cells.emplace_back(b * g.stride + cx, cy);
+      o = 1;
+    }
+  }
+  g.occupied = cells.size();
+  // The likelihood kernel, stamped (max) once per occupied cell and clipped to its band.
+  const int k = static_cast<int>(std::ceil(2.0 * cfg.blur_sigma / r));
+  std::vector<std::uint8_t> kernel(static_cast<std::size_t>(2 * k + 1) * (2 * k + 1), 255);
+  if (cfg.blur_sigma > 0.0)
+    for (int dy = -k; dy <= k; ++dy)
+      for (int dx = -k; dx <= k; ++dx)
+        kernel[static_cast<std::size_t>(dy + k) * (2 * k + 1) + dx + k] = static_cast<std::uint8_t>(
+            std::lround(255.0 * std::exp(-(dx * dx + dy * dy) * r * r / (2 * cfg.blur_sigma * cfg.blur_sigma))));
+  for (const Eigen::Vector2i& c : cells) {
+    const int band_x0 = (c.x() / g.stride) * g.stride;
+    for (int dy = -k; dy <= k; ++dy)
+      for (int dx = -k; dx <= k; ++dx) {
+        const int x = c.x() + dx, y = c.y() + dy;
+        if (x < band_x0 || y < 0 || x >= band_x0 + side || y >= side) continue;
+        std::uint8_t& v = g.values[static_cast<std::size_t>(y) * width + x];
+        v = std::max(v, kernel[static_cast<std::size_t>(dy + k) * (2 * k + 1) + dx + k]);
+      }
+  }
+  return g;
 }
 
 }  // namespace
@@ -99,8 +144,16 @@ std::string GlobalLocalizationConfig::validate() const {
   positive("runner_up_distance", runner_up_distance);
   positive("runner_up_yaw", runner_up_yaw);
   positive("max_refinement_shift", max_refinement_shift);
-  if (!std::isfinite(min_height) || !std::isfinite(max_height) || !(min_height < max_height))
-    err << "min_height must be < max_height, both finite (got " << min_height << ", " << max_height << "); ";
+  bool increasing = height_bands.size() >= 2;
+  for (std::size_t i = 0; i < height_bands.size(); ++i)
+    increasing = increasing && std::isfinite(height_bands[i]) && (i == 0 || height_bands[i] > height_bands[i - 1]);
+  if (!increasing) err << "height_bands must hold >= 2 finite, strictly increasing heights [m]; ";
+  if (height_bands.size() > 16) err << "height_bands must hold at most 16 edges; ";
+  if (!(band_overlap >= 0.0) || !std::isfinite(band_overlap))
+    err << "band_overlap must be >= 0 (got " << band_overlap << "); ";
+  if (refine_candidates < 1) err << "refine_candidates must be >= 1 (got " << refine_candidates << "); ";
+  positive("same_pose_distance", same_pose_distance);
+  positive("same_pose_yaw", same_pose_yaw);
   if (max_scan_points < 10) err << "max_scan_points must be >= 10 (got " << max_scan_points << "); ";
   if (min_scan_points < 3) err << "min_scan_points must be >= 3 (got " << min_scan_points << "); ";
   if (!(blur_sigma >= 0.0) || !std::isfinite(blur_sigma)) err << "blur_sigma must be >= 0 (got " << blur_sigma << "); ";
@@ -117,9 +170,10 @@ std::string GlobalLocalizationConfig::validate() const {
 }
 
 struct GlobalLocalizer::Map {
-  std::vector<Eigen::Vector2d> structure;  ///< [m] x-y of the map's structure points
+  Map(const std::vector<Eigen::Vector3d>& points, double ground_cell) : ground(points, ground_cell) {}
   GroundCells ground;
-  Eigen::AlignedBox2d bounds;
+  std::vector<StructurePoint> structure;  ///< within band_overlap of the height bands
+  Eigen::AlignedBox2d bounds;             ///< [m] x-y of the structure
   std::shared_ptr<const VoxelMap> ndt_target;
 };
 
@@ -132,19 +186,17 @@ GlobalLocalizer::GlobalLocalizer(GlobalLocalizer&&) noexcept = default;
 GlobalLocalizer& GlobalLocalizer::operator=(GlobalLocalizer&&) noexcept = default;
 
 void GlobalLocalizer::setMap(const PointCloud& map_points, std::shared_ptr<const VoxelMap> ndt_target) {
-  auto map = std::make_unique<Map>();
+  if (ndt_target && std::abs(ndt_target->resolution() - config_.ndt.resolution) > 1e-9)
+    throw std::invalid_argument("GlobalLocalizer::setMap: the NDT target's resolution differs from ndt.resolution");
   std::vector<Eigen::Vector3d> points;
   points.reserve(map_points.size());
   for (const Point& p : map_points)
     if (p.allFinite()) points.push_back(p.cast<double>());
-  map->ground = groundCells(points, config_.ground_cell);
-  for (const Eigen::Vector3d& p : structurePoints(points, map->ground, config_)) {
-    map->structure.push_back(p.head<2>());
-    map->bounds.extend(p.head<2>());
-  }
+  auto map = std::make_unique<Map>(points, config_.ground_cell);
+  map->structure = structurePoints(points, map->ground, config_.height_bands.front() - config_.band_overlap,
+                                   config_.height_bands.back() + config_.band_overlap);
+  for (const StructurePoint& p : map->structure) map->bounds.extend(p.xy);
   if (ndt_target) {
-    if (std::abs(ndt_target->resolution() - config_.ndt.resolution) > 1e-9)
-      throw std::invalid_argument("GlobalLocalizer::setMap: the NDT target's resolution differs from ndt.resolution");
     map->ndt_target = std::move(ndt_target);
   } else {
     NdtTarget target(config_.ndt);
@@ -189,38 +241,24 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
     if (q.head<2>().norm() <= cfg.max_range) leveled.push_back(q);
   }
   if (finite.empty()) return refused(result, "the scan has no finite points: check the scan topic or file", start);
-  const GroundCells scan_ground = groundCells(leveled, cfg.ground_cell);
-  // Thin the scan's structure to one point per search cell (first seen), then to max_scan_points evenly.
-  std::vector<Eigen::Vector2d> points;
-  {
-    std::unordered_set<std::int64_t> seen;
-    for (const Eigen::Vector3d& q : structurePoints(leveled, scan_ground, cfg))
-      if (seen.insert(cellKey(static_cast<std::int64_t>(std::floor(q.x() / cfg.resolution)),
-                              static_cast<std::int64_t>(std::floor(q.y() / cfg.resolution))))
-              .second)
-        points.push_back(q.head<2>());
-  }
-  if (points.size() > static_cast<std::size_t>(cfg.max_scan_points)) {
-    std::vector<Eigen::Vector2d> kept;
-    for (int i = 0; i < cfg.max_scan_points; ++i)
-      kept.push_back(points[static_cast<std::size_t>(i) * points.size() / cfg.max_scan_points]);
-    points.swap(kept);
-  }
-  result.scan_points_used = points.size();
-  if (points.size() < static_cast<std::size_t>(cfg.min_scan_points)) {
+  const GroundCells scan_ground(leveled, cfg.ground_cell);
+  const ScanStructure points =
+      scanStructure(structurePoints(leveled, scan_ground, cfg.height_bands.front(), cfg.height_bands.back()), cfg);
+  result.scan_points_used = points.xy.size();
+  if (points.xy.size() < static_cast<std::size_t>(cfg.min_scan_points)) {
     std::ostringstream msg;
-    msg << "too few points: the scan has " << points.size() << " structure points (min_height..max_height above "
+    msg << "too few points: the scan has " << points.xy.size() << " structure points (in the height bands above "
         << "the ground, within max_range), the search needs min_scan_points = " << cfg.min_scan_points;
     return refused(result, msg.str(), start);
   }
   double scan_ground_z = 0.0;
-  if (!groundHeight(scan_ground, cfg.ground_cell, 0.0, 0.0, &scan_ground_z))
-    return refused(result, "the scan shows no ground within 8 m of the sensor, so z cannot be set", start);
+  if (!scan_ground.heightNear(0.0, 0.0, kGroundRadius, &scan_ground_z))
+    return refused(result, "the scan shows no ground near the sensor, so z cannot be set", start);
 
   // Yaws: the step moves the farthest point by at most one cell.
-  double reach = cfg.resolution;
-  for (const Eigen::Vector2d& p : points) reach = std::max(reach, p.norm());
-  const double step = cfg.yaw_step > 0.0 ? cfg.yaw_step : cfg.resolution / reach;
+  const double r = cfg.resolution;
+  const double reach = std::max(r, points.reach);
+  const double step = cfg.yaw_step > 0.0 ? cfg.yaw_step : r / reach;
   std::vector<double> yaws;
   if (request.yaw_range >= kTwoPi - 1e-9) {
     const int n = static_cast<int>(std::ceil(kTwoPi / step));
@@ -231,59 +269,36 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
       yaws.push_back(wrapAngle(request.yaw_center - request.yaw_range / 2 + request.yaw_range * i / (n - 1)));
   }
 
-  // The grid: the search square plus the scan's reach on each side, in whole cells so poses sit on cell corners.
-  const double r = cfg.resolution;
+  // The grids: the search square plus the scan's reach on each side, in whole cells so poses sit on cell corners.
   const int window = static_cast<int>(std::floor(request.size / r)) + 1;
   const int margin = static_cast<int>(std::ceil(reach / r)) + 1;
   const double x_lo = request.center_x - request.size / 2, y_lo = request.center_y - request.size / 2;
-  const double gx0 = x_lo - margin * r, gy0 = y_lo - margin * r;
-  const int side = window + 2 * margin + 1;
-  std::vector<std::uint8_t> fine(static_cast<std::size_t>(side) * side, 0);
-  const int k = static_cast<int>(std::ceil(2.0 * cfg.blur_sigma / r));
-  std::vector<std::uint8_t> kernel(static_cast<std::size_t>(2 * k + 1) * (2 * k + 1), 255);
-  if (cfg.blur_sigma > 0.0)
-    for (int dy = -k; dy <= k; ++dy)
-      for (int dx = -k; dx <= k; ++dx)
-        kernel[static_cast<std::size_t>(dy + k) * (2 * k + 1) + dx + k] = static_cast<std::uint8_t>(
-            std::lround(255.0 * std::exp(-(dx * dx + dy * dy) * r * r / (2 * cfg.blur_sigma * cfg.blur_sigma))));
-  std::size_t map_cells_in_square = 0;
-  for (const Eigen::Vector2d& m : map_->structure) {
-    const int cx = static_cast<int>(std::floor((m.x() - gx0) / r)),
-              cy = static_cast<int>(std::floor((m.y() - gy0) / r));
-    if (cx < -k || cy < -k || cx >= side + k || cy >= side + k) continue;
-    if (cx >= margin && cy >= margin && cx <= margin + window && cy <= margin + window) ++map_cells_in_square;
-    for (int dy = -k; dy <= k; ++dy)
-      for (int dx = -k; dx <= k; ++dx) {
-        const int x = cx + dx, y = cy + dy;
-        if (x < 0 || y < 0 || x >= side || y >= side) continue;
-        std::uint8_t& v = fine[static_cast<std::size_t>(y) * side + x];
-        v = std::max(v, kernel[static_cast<std::size_t>(dy + k) * (2 * k + 1) + dx + k]);
-      }
-  }
-  if (map_cells_in_square == 0) {
+  BandGrids grids = bandGrids(map_->structure, cfg, x_lo - margin * r, y_lo - margin * r, window + 2 * margin + 1);
+  if (grids.occupied == 0) {
     std::ostringstream msg;
     const Eigen::AlignedBox2d& b = map_->bounds;
-    msg << "no map structure in the search square (centre " << request.center_x << ", " << request.center_y << ", size "
-        << request.size << " m); the map's structure spans x " << b.min().x() << ".." << b.max().x() << ", y "
-        << b.min().y() << ".." << b.max().y() << ": move the centre onto the map";
+    msg << "no map structure within the scan's reach of the search square (centre " << request.center_x << ", "
+        << request.center_y << ", size " << request.size << " m); the map's structure spans x " << b.min().x() << ".."
+        << b.max().x() << ", y " << b.min().y() << ".." << b.max().y() << ": move the centre onto the map";
     return refused(result, msg.str(), start);
   }
-
-  const LikelihoodPyramid pyramid(std::move(fine), side, side, cfg.levels);
+  const int width = static_cast<int>(grids.values.size()) / grids.side;
+  const LikelihoodPyramid pyramid(std::move(grids.values), width, grids.side, cfg.levels);
   BbsProblem problem;
   problem.pyramid = &pyramid;
   problem.width = problem.height = window;
   for (const double yaw : yaws) {
     const Eigen::Rotation2Dd rot(yaw);
     std::vector<Eigen::Vector2i> cells;
-    cells.reserve(points.size());
-    for (const Eigen::Vector2d& p : points) {
-      const Eigen::Vector2d q = rot * p / r + Eigen::Vector2d::Constant(margin);
-      cells.emplace_back(static_cast<int>(std::floor(q.x())), static_cast<int>(std::floor(q.y())));
+    cells.reserve(points.xy.size());
+    for (std::size_t i = 0; i < points.xy.size(); ++i) {
+      const Eigen::Vector2d q = rot * points.xy[i] / r + Eigen::Vector2d::Constant(margin);
+      cells.emplace_back(static_cast<int>(std::floor(q.x())) + points.band[i] * grids.stride,
+                         static_cast<int>(std::floor(q.y())));
     }
     problem.cells.push_back(std::move(cells));
   }
-  const double full = 255.0 * static_cast<double>(points.size());
+  const double full = 255.0 * static_cast<double>(points.xy.size());
   const auto min_score = static_cast<std::int64_t>(std::ceil(cfg.min_score * full));
   const BbsOutcome outcome = branchAndBound(problem, min_score, cfg.max_runner_up_ratio,
                                             cfg.adapted_initial_score ? cfg.initial_descents : 0, cfg.threads);
@@ -294,51 +309,68 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
         << ": the robot is elsewhere, or the map or the scan shows too little of the same structure";
     return refused(result, msg.str(), start);
   }
-
-  const BbsNode& winner = outcome.leaves.front();
-  const double wx = x_lo + winner.x * r, wy = y_lo + winner.y * r, wyaw = yaws[static_cast<std::size_t>(winner.yaw)];
-  result.score = static_cast<double>(winner.score) / full;
-  // Every leaf scores >= max_runner_up_ratio * best, so a far one makes the answer ambiguous; without one, that
-  // product bounds the runner-up from above.
+  result.score = static_cast<double>(outcome.leaves.front().score) / full;
   result.runner_up_score = cfg.max_runner_up_ratio * result.score;
-  bool ambiguous = false;
+
+  // Distinct candidates: the best leaf, then each next leaf far (in position or yaw) from all kept ones.
+  auto x_of = [&](const BbsNode& n) { return x_lo + n.x * r; };
+  auto y_of = [&](const BbsNode& n) { return y_lo + n.y * r; };
+  auto yaw_of = [&](const BbsNode& n) { return yaws[static_cast<std::size_t>(n.yaw)]; };
+  std::vector<BbsNode> distinct;
   for (const BbsNode& leaf : outcome.leaves) {
-    const double distance = r * std::hypot(leaf.x - winner.x, leaf.y - winner.y);
-    const double turn = std::abs(wrapAngle(yaws[static_cast<std::size_t>(leaf.yaw)] - wyaw));
-    if (distance >= cfg.runner_up_distance || turn >= cfg.runner_up_yaw) {
-      result.runner_up_score = static_cast<double>(leaf.score) / full;
-      ambiguous = true;
-      break;
-    }
+    bool far = true;
+    for (const BbsNode& d : distinct)
+      far = far && (r * std::hypot(leaf.x - d.x, leaf.y - d.y) >= cfg.runner_up_distance ||
+                    std::abs(wrapAngle(yaw_of(leaf) - yaw_of(d))) >= cfg.runner_up_yaw);
+    if (!far) continue;
+    distinct.push_back(leaf);
+    if (distinct.size() > static_cast<std::size_t>(cfg.refine_candidates)) break;
+  }
+
+  // Refine with NDT, z from the map's ground under the candidate and the scan's under the sensor, roll and pitch from
+  // gravity. A candidate that refines to the winner's pose is the slope of the same peak; the first one that does
+  // not (or that is not refined) is the runner-up.
+  const NdtAligner aligner(cfg.ndt);
+  const PointCloud source = voxelDownsample(finite, r);
+  auto refine = [&](const BbsNode& n, Eigen::Isometry3d* guess, NdtResult* ndt) {
+    double ground_z = 0.0;
+    if (!map_->ground.heightNear(x_of(n), y_of(n), kGroundRadius, &ground_z)) return false;
+    guess->setIdentity();
+    guess->translation() = Eigen::Vector3d(x_of(n), y_of(n), ground_z - scan_ground_z);
+    guess->linear() = Eigen::AngleAxisd(yaw_of(n), Eigen::Vector3d::UnitZ()).toRotationMatrix() * level;
+    *ndt = aligner.align(*map_->ndt_target, source, guess->cast<float>().matrix());
+    return ndt->status == NdtResultStatus::OK || ndt->status == NdtResultStatus::MAX_ITERATIONS;
+  };
+  Eigen::Isometry3d guess;
+  if (!refine(distinct.front(), &guess, &result.refinement)) {
+    result.map_T_base = guess;
+    return refused(result,
+                   std::string("the NDT refinement of the best candidate failed (") +
+                       toString(result.refinement.status) + ": " + result.refinement.message + ")",
+                   start);
+  }
+  result.map_T_base.matrix() = result.refinement.transform.cast<double>();
+  bool ambiguous = false;
+  for (std::size_t i = 1; i < distinct.size() && !ambiguous; ++i) {
+    Eigen::Isometry3d other_guess;
+    NdtResult other;
+    const bool same = i <= static_cast<std::size_t>(cfg.refine_candidates) && refine(distinct[i], &other_guess, &other);
+    const Eigen::Isometry3d delta = result.map_T_base.inverse() * Eigen::Isometry3d(other.transform.cast<double>());
+    if (same && delta.translation().norm() < cfg.same_pose_distance &&
+        Eigen::AngleAxisd(delta.linear()).angle() < cfg.same_pose_yaw)
+      continue;
+    ambiguous = true;
+    result.runner_up_score = static_cast<double>(distinct[i].score) / full;
   }
   result.confidence = std::clamp(1.0 - result.runner_up_score / result.score, 0.0, 1.0);
-
-  // z from the map's ground under the winner and the scan's ground under the sensor; roll and pitch from gravity.
-  double map_ground_z = 0.0;
-  if (!groundHeight(map_->ground, cfg.ground_cell, wx, wy, &map_ground_z))
-    return refused(result, "the map has no ground within 8 m of the best pose, so z cannot be set", start);
-  Eigen::Isometry3d guess = Eigen::Isometry3d::Identity();
-  guess.translation() = Eigen::Vector3d(wx, wy, map_ground_z - scan_ground_z);
-  guess.linear() = Eigen::AngleAxisd(wyaw, Eigen::Vector3d::UnitZ()).toRotationMatrix() * level;
-  result.map_T_base = guess;
-
-  // NDT refinement of the winner.
-  const NdtAligner aligner(cfg.ndt);
-  result.refinement =
-      aligner.align(*map_->ndt_target, voxelDownsample(finite, cfg.resolution), guess.cast<float>().matrix());
-  const NdtResult& ndt = result.refinement;
-  const bool usable = ndt.status == NdtResultStatus::OK || ndt.status == NdtResultStatus::MAX_ITERATIONS;
-  if (usable) result.map_T_base.matrix() = ndt.transform.cast<double>();
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
   std::ostringstream why;
-  const double shift = (result.map_T_base.translation() - guess.translation()).norm();
+  const NdtResult& ndt = result.refinement;
+  const double shift = (result.map_T_base.translation() - guess.translation()).head<2>().norm();
   if (ambiguous)
-    why << "ambiguous: a pose " << cfg.runner_up_distance << " m or " << cfg.runner_up_yaw << " rad away scores "
-        << result.runner_up_score << " against the best " << result.score << " (max_runner_up_ratio "
-        << cfg.max_runner_up_ratio << "): search a smaller area or give a better centre";
-  else if (!usable)
-    why << "the NDT refinement failed (" << toString(ndt.status) << ": " << ndt.message << ")";
+    why << "ambiguous: another place scores " << result.runner_up_score << " against the best " << result.score
+        << " (max_runner_up_ratio " << cfg.max_runner_up_ratio << "): search a smaller area or give a better centre";
   else if (ndt.inlier_fraction < cfg.min_inlier_fraction)
     why << "the refined pose explains only " << ndt.inlier_fraction << " of the scan (min_inlier_fraction "
         << cfg.min_inlier_fraction << ")";

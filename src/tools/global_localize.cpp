@@ -19,7 +19,7 @@ namespace {
 
 const char* kUsage =
     "usage: global_localize --map MAP.pcd [--map MAP2.pcd ...] --scan SCAN.pcd [--center X Y] [--size S]\n"
-    "                       [--yaw-center A] [--yaw-range A] [--threads N] [--plain] [--map-voxel V]\n"
+    "                       [--yaw-center A] [--yaw-range A] [--threads N] [--plain] [--set NAME=V] [--map-voxel V]\n"
     "       global_localize --map MAP.pcd [...] --requests FILE [--threads N] [--plain] [--map-voxel V]\n"
     "       global_localize --print-config\n"
     "Finds the pose of SCAN (x y z PCD, base frame) on the map (x y z PCD files, map frame) and prints JSON:\n"
@@ -29,6 +29,7 @@ const char* kUsage =
     "  --yaw-center   [rad] (default 0); --yaw-range [rad] full width (default 2 pi = full circle)\n"
     "  --threads      OpenMP threads, 0 = all cores (default 0)\n"
     "  --plain        plain branch and bound (no adapted initial score S0), for comparison\n"
+    "  --set NAME=V   a numeric field of GlobalLocalizationConfig (e.g. --set resolution=0.4), repeatable\n"
     "  --map-voxel    downsampling leaf of the map [m], 0 = off (default 0.1)\n"
     "  --requests     one search per line: SCAN.pcd CENTER_X CENTER_Y SIZE YAW_CENTER YAW_RANGE; one JSON line\n"
     "                 each, with the map loaded once\n"
@@ -60,6 +61,44 @@ struct Args {
   gpl::GlobalLocalizationConfig config;
   double map_voxel = 0.1;
 };
+
+/// --set NAME=VALUE: one numeric field of GlobalLocalizationConfig.
+void set(gpl::GlobalLocalizationConfig* c, const std::string& assignment) {
+  const std::size_t eq = assignment.find('=');
+  const std::string name = assignment.substr(0, eq);
+  const double v = eq == std::string::npos ? 0.0 : number("--set " + name, assignment.substr(eq + 1));
+  const std::pair<const char*, double*> reals[] = {{"resolution", &c->resolution},
+                                                   {"ground_cell", &c->ground_cell},
+                                                   {"band_overlap", &c->band_overlap},
+                                                   {"max_range", &c->max_range},
+                                                   {"blur_sigma", &c->blur_sigma},
+                                                   {"yaw_step", &c->yaw_step},
+                                                   {"min_score", &c->min_score},
+                                                   {"max_runner_up_ratio", &c->max_runner_up_ratio},
+                                                   {"runner_up_distance", &c->runner_up_distance},
+                                                   {"runner_up_yaw", &c->runner_up_yaw},
+                                                   {"same_pose_distance", &c->same_pose_distance},
+                                                   {"same_pose_yaw", &c->same_pose_yaw},
+                                                   {"min_inlier_fraction", &c->min_inlier_fraction},
+                                                   {"max_refinement_shift", &c->max_refinement_shift}};
+  const std::pair<const char*, int*> integers[] = {{"max_scan_points", &c->max_scan_points},
+                                                   {"min_scan_points", &c->min_scan_points},
+                                                   {"levels", &c->levels},
+                                                   {"initial_descents", &c->initial_descents},
+                                                   {"refine_candidates", &c->refine_candidates}};
+  for (const auto& [key, field] : reals)
+    if (eq != std::string::npos && name == key) {
+      *field = v;
+      return;
+    }
+  for (const auto& [key, field] : integers)
+    if (eq != std::string::npos && name == key) {
+      *field = static_cast<int>(v);
+      return;
+    }
+  throw UsageError("--set expects NAME=VALUE with a numeric field of GlobalLocalizationConfig, got '" + assignment +
+                   "'");
+}
 
 Args parse(int argc, char** argv) {
   Args a;
@@ -105,6 +144,9 @@ Args parse(int argc, char** argv) {
       ++i;
     } else if (opt == "--plain") {
       a.config.adapted_initial_score = false;
+    } else if (opt == "--set") {
+      set(&a.config, value());
+      ++i;
     } else if (opt == "--map-voxel") {
       a.map_voxel = number(opt, value());
       if (a.map_voxel < 0.0) throw UsageError("--map-voxel must be >= 0 m (0 disables downsampling)");
@@ -160,8 +202,9 @@ int main(int argc, char** argv) {
     gpl::GlobalLocalizer localizer(a.config);
     localizer.setMap(finitePoints(map, a.map_voxel));
     if (!localizer.hasMap())
-      throw std::runtime_error("the map files hold no structure above the ground (min_height " +
-                               std::to_string(a.config.min_height) + " m): are they the right files?");
+      throw std::runtime_error(
+          "the map files hold no structure in the height bands above the ground: are they the "
+          "right files?");
     if (!a.requests.empty()) {
       std::ifstream in(a.requests);
       if (!in) throw std::runtime_error("cannot read the requests file '" + a.requests + "'");

@@ -257,7 +257,7 @@ TEST_F(GlobalLocalizerTest, RefusesBadInputWithAClearReason) {
 
   const gpl::GlobalLocalizationResult off = localizer.localize(scan, around(500.0, -300.0));
   EXPECT_FALSE(off.found);
-  EXPECT_NE(off.reason.find("no map structure in the search square"), std::string::npos) << off.reason;
+  EXPECT_NE(off.reason.find("no map structure within the scan"), std::string::npos) << off.reason;
 
   gpl::GlobalSearchRequest bad = around(0, 0);
   bad.size = -1.0;
