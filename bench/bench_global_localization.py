@@ -22,7 +22,6 @@ import argparse
 import json
 import math
 import os
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -101,28 +100,34 @@ def percentile(values: list[float], q: float) -> float:
     return float(np.percentile(values, q)) if values else float("nan")
 
 
-def summary(dataset: str, mode: str, size: float, threads: int, trials: list[Trial], answers: list[dict]) -> dict:
-    errs = [errors(a, t.truth) for a, t in zip(answers, trials)]
-    found = [a["found"] for a in answers]
-    ok = [f and e[0] <= SUCCESS_M and e[1] <= SUCCESS_DEG for f, e in zip(found, errs)]
-    seconds = [a["seconds"] for a in answers]
-    accepted_errors = [e[0] for f, e in zip(found, errs) if f]
+def scored(answers: list[dict], trials: list[Trial]) -> list[dict]:
+    """Each answer with its errors against the truth and whether it counts as a success."""
+    out = []
+    for k, answer in enumerate(answers):
+        error_m, error_deg = errors(answer, trials[k].truth)
+        ok = answer["found"] and error_m <= SUCCESS_M and error_deg <= SUCCESS_DEG
+        out.append({**answer, "error_m": error_m, "error_deg": error_deg, "success": ok})
+    return out
+
+
+def summary(dataset: str, mode: str, size: float, threads: int, rows: list[dict]) -> dict:
+    accepted = [r for r in rows if r["found"]]
     return {
         "dataset": dataset,
         "mode": mode,
         "search_size_m": size,
         "yaw_range_deg": 360.0,
         "threads": threads,
-        "trials": len(answers),
-        "success_rate": sum(ok) / len(ok),
-        "refused": sum(not f for f in found),
-        "accepted_wrong": sum(f and not o for f, o in zip(found, ok)),
-        "median_seconds": percentile(seconds, 50),
-        "p95_seconds": percentile(seconds, 95),
-        "median_translation_error_m": percentile(accepted_errors, 50),
-        "median_rotation_error_deg": percentile([e[1] for f, e in zip(found, errs) if f], 50),
-        "median_candidates": percentile([a["candidates_evaluated"] for a in answers], 50),
-        "refusal_reasons": sorted({a["reason"].split(":")[0] for a in answers if not a["found"]}),
+        "trials": len(rows),
+        "success_rate": sum(r["success"] for r in rows) / len(rows),
+        "refused": len(rows) - len(accepted),
+        "accepted_wrong": sum(not r["success"] for r in accepted),
+        "median_seconds": percentile([r["seconds"] for r in rows], 50),
+        "p95_seconds": percentile([r["seconds"] for r in rows], 95),
+        "median_translation_error_m": percentile([r["error_m"] for r in accepted], 50),
+        "median_rotation_error_deg": percentile([r["error_deg"] for r in accepted], 50),
+        "median_candidates": percentile([r["candidates_evaluated"] for r in rows], 50),
+        "refusal_reasons": sorted({r["reason"].split(":")[0] for r in rows if not r["found"]}),
     }
 
 
@@ -247,11 +252,11 @@ def main() -> int:
             for mode in chosen:
                 size, plain = modes[mode]
                 answers = search(program, map_pcd, data, size, args.threads, plain, args.set)
+                rows = scored(answers, data)
                 if args.per_trial:
-                    for t, a in zip(data, answers):
-                        e = errors(a, t.truth)
-                        print(json.dumps({"dataset": dataset, "mode": mode, "error_m": e[0], "error_deg": e[1], **a}))
-                row = summary(dataset, mode, size, args.threads, data, answers)
+                    for r in rows:
+                        print(json.dumps({"dataset": dataset, "mode": mode, **r}))
+                row = summary(dataset, mode, size, args.threads, rows)
                 row.update(hardware, load_average_1min=os.getloadavg()[0], overrides=args.set)
                 print(json.dumps(row), flush=True)
     return 0
