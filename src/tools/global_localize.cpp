@@ -2,6 +2,7 @@
 // pose on the map by branch-and-bound search and NDT, prints one JSON object per search. Used by
 // `gpm global-localize` (which picks the tile files) and by bench/bench_global_localization.py.
 #include <cmath>
+#include <ctime>
 #include <fstream>
 #include <iostream>
 #include <limits>
@@ -162,7 +163,9 @@ Args parse(int argc, char** argv) {
   return a;
 }
 
-std::string json(const gpl::GlobalLocalizationResult& r) {
+/// One search as JSON; `cpu_seconds` is the process's CPU time of it (all threads), which a busy machine does not
+/// inflate the way it inflates the wall time.
+std::string json(const gpl::GlobalLocalizationResult& r, double cpu_seconds) {
   const Eigen::Matrix3d R = r.map_T_base.linear();
   const Eigen::Vector3d t = r.map_T_base.translation();
   // Fixed-axis roll-pitch-yaw of R = Rz(yaw) Ry(pitch) Rx(roll).
@@ -178,9 +181,14 @@ std::string json(const gpl::GlobalLocalizationResult& r) {
      << ", \"score\": " << r.score << ", \"runner_up_score\": " << r.runner_up_score
      << ", \"confidence\": " << r.confidence << ", \"seconds\": " << r.seconds
      << ", \"candidates_evaluated\": " << r.candidates_evaluated << ", \"scan_points_used\": " << r.scan_points_used
-     << ", \"ndt_status\": \"" << gpl::toString(r.refinement.status) << "\", \"reason\": \"" << reason << "\"}";
+     << ", \"cpu_seconds\": " << cpu_seconds
+     << ", \"ndt_transformation_probability\": " << r.refinement.transformation_probability
+     << ", \"ndt_inlier_fraction\": " << r.refinement.inlier_fraction << ", \"ndt_status\": \""
+     << gpl::toString(r.refinement.status) << "\", \"reason\": \"" << reason << "\"}";
   return js.str();
 }
+
+double cpuSince(std::clock_t start) { return static_cast<double>(std::clock() - start) / CLOCKS_PER_SEC; }
 
 gpl::PointCloud finitePoints(const gpl::PointCloud& cloud, double voxel) {
   gpl::PointCloud out;
@@ -216,7 +224,10 @@ int main(int argc, char** argv) {
         if (!(fields >> scan >> q.center_x >> q.center_y >> q.size >> q.yaw_center >> q.yaw_range))
           throw std::runtime_error(a.requests + " line " + std::to_string(n) +
                                    ": expected SCAN.pcd CENTER_X CENTER_Y SIZE YAW_CENTER YAW_RANGE");
-        std::cout << json(localizer.localize(gpl::readPcdXyz(scan), q)) << std::endl;
+        const gpl::PointCloud points = gpl::readPcdXyz(scan);
+        const std::clock_t cpu = std::clock();
+        const gpl::GlobalLocalizationResult r = localizer.localize(points, q);
+        std::cout << json(r, cpuSince(cpu)) << std::endl;
       }
       return 0;
     }
@@ -225,8 +236,10 @@ int main(int argc, char** argv) {
       a.request.center_x = c.x();
       a.request.center_y = c.y();
     }
-    const gpl::GlobalLocalizationResult r = localizer.localize(gpl::readPcdXyz(a.scan), a.request);
-    std::cout << json(r) << std::endl;
+    const gpl::PointCloud points = gpl::readPcdXyz(a.scan);
+    const std::clock_t cpu = std::clock();
+    const gpl::GlobalLocalizationResult r = localizer.localize(points, a.request);
+    std::cout << json(r, cpuSince(cpu)) << std::endl;
     if (!r.found) {
       std::cerr << "global_localize: no acceptable pose: " << r.reason << "\n";
       return 1;
