@@ -262,5 +262,5 @@ def load_tile_index(directory: str | os.PathLike) -> TileIndex:
         return TileIndex(
             **{**raw, "origin": tuple(raw["origin"])}, grid_size=grid_size, table=table, directory=directory
         )
-    except (KeyError, TypeError, ValueError, UserError) as err:
+    except (KeyError, IndexError, TypeError, ValueError, UserError) as err:
         raise UserError(f"{path}: malformed tile index ({err}); re-run `gpm tile`") from None
