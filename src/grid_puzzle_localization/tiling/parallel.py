@@ -129,6 +129,8 @@ def _run_child(job: Callable[[], None]) -> None:
     try:
         job()
         status = 0
+    except OSError as err:  # disk full, permissions: the parent reports the failure, this says why
+        print(f"tile writer process: {err}", file=sys.stderr)
     except BaseException:
         traceback.print_exc(file=sys.stderr)
     finally:
