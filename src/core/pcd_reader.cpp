@@ -172,6 +172,8 @@ void checkPointsFit(const std::string& path, const Header& h, const char* data, 
     for (const Field& f : h.fields) columns += f.count;
     // A point is a line of `columns` values of at least one character, each followed by a blank or newline.
     if (h.points > (avail + 1) / (2 * columns)) fail(path, claim + ": the ascii data is too short for that many");
+  } else {
+    fail(path, "unsupported DATA '" + h.data + "' (ascii, binary and binary_compressed are supported)");
   }
 }
 
@@ -203,7 +205,7 @@ PointCloud readPcdXyz(const std::string& path) {
       const std::size_t stride = static_cast<std::size_t>(xyz[a]->size) * xyz[a]->count;
       for (std::size_t i = 0; i < h.points; ++i) cloud[i][a] = readFloat(raw.data() + base + i * stride, xyz[a]->size);
     }
-  } else if (h.data == "ascii") {
+  } else {  // ascii, the last encoding checkPointsFit lets through
     // Columns: each field contributes `count` values; find the column of x, y, z.
     std::size_t col[3] = {0, 0, 0}, columns = 0;
     for (const Field& f : h.fields) {
@@ -231,8 +233,6 @@ PointCloud readPcdXyz(const std::string& path) {
     }
     if (i < h.points)
       fail(path, "ascii data holds " + std::to_string(i) + " points, POINTS says " + std::to_string(h.points));
-  } else {
-    fail(path, "unsupported DATA '" + h.data + "' (ascii, binary and binary_compressed are supported)");
   }
   return cloud;
 }
