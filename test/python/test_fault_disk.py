@@ -111,8 +111,8 @@ def test_disk_full_during_simulate_keeps_previous_output(small_disk):
 
 @pytest.mark.parametrize("jobs", ["1", "2"])
 def test_sigint_during_tile_leaves_no_partial_output(tmp_path, jobs):
-    """SIGINT once the tiler has started writing (its staging directory exists), in the single-process
-    tiler and with forked tile writers."""
+    """SIGINT once the tiler writes tile files (into its staging directory), in the single-process tiler
+    and with forked tile writers (40,000 tiles)."""
     big = random_map(tmp_path / "big.pcd", 2_000_000, 400.0, seed=3)
     previous = tmp_path / "previous"
     rc, err = finished(
@@ -123,7 +123,7 @@ def test_sigint_during_tile_leaves_no_partial_output(tmp_path, jobs):
     for target, force in ((tmp_path / "fresh", []), (previous, ["--force"])):
         proc = gpm("tile", "--grid-size", "2", "--jobs", jobs, "--no-progress", str(big), "-o", str(target), *force)
         deadline = time.monotonic() + 120
-        while not list(tmp_path.glob(f".{target.name}.tmp-*")) and proc.poll() is None:
+        while not list(tmp_path.glob(f".{target.name}.tmp-*/*.pcd")) and proc.poll() is None:
             assert time.monotonic() < deadline, "the tiler never started writing"
             time.sleep(0.01)
         interrupted = time.monotonic()
