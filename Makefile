@@ -106,3 +106,33 @@ bench-monitor: build
 # make experiment-paper [SCENARIOS="courtyard urban"]
 experiment-paper: build
 	@$(SETUP) bash $(ROOT)/tools/experiment_paper.sh $(SCENARIOS)
+
+# ---------------------------------------------------------------- reliability: fuzzing, sanitizers, faults
+.PHONY: fuzz-build fuzz asan reliability
+FUZZ_SECONDS ?= 60
+FUZZ_PARALLEL ?= 2
+
+# libFuzzer binaries (clang, ASan + UBSan) of test/fuzz in their own build tree.
+fuzz-build: setup
+	cmake -S $(ROOT)/test/fuzz -B $(ROOT)/build/build_fuzz -DCMAKE_CXX_COMPILER=clang++-14 \
+	  -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+	cmake --build $(ROOT)/build/build_fuzz -j2
+
+# make fuzz FUZZ_SECONDS=600: every fuzz target (C++ and Python) for that long; one JSON line per target.
+fuzz: fuzz-build
+	$(ROOT)/.venv/bin/python3 $(ROOT)/tools/fuzz.py --seconds $(FUZZ_SECONDS) --parallel $(FUZZ_PARALLEL)
+
+# Every gtest of test/cpp under AddressSanitizer and UndefinedBehaviorSanitizer, in its own build tree.
+asan: setup
+	cmake -S $(ROOT)/test/asan -B $(ROOT)/build/build_asan -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
+	cmake --build $(ROOT)/build/build_asan -j2
+	cd $(ROOT) && status=0; for t in $(ROOT)/build/build_asan/test_*; do \
+	  echo "== asan $$(basename $$t)"; \
+	  ASAN_OPTIONS="detect_leaks=1" UBSAN_OPTIONS="print_stacktrace=1" $$t || status=1; \
+	done; exit $$status
+
+# make reliability [FUZZ_SECONDS=600]: every fuzz target (at niceness 19, FUZZ_PARALLEL at a time), the fault
+# tests and the replay of the inputs fuzzing found; prints a markdown report, writes build/reliability/report.jsonl.
+reliability: fuzz-build build
+	@$(SETUP) $(ROOT)/.venv/bin/python3 $(ROOT)/tools/reliability.py --fuzz-seconds $(FUZZ_SECONDS) \
+	  --parallel $(FUZZ_PARALLEL)

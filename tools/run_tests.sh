@@ -1,15 +1,17 @@
 #!/usr/bin/env bash
 # Runs every test (gtest binaries, pytest, rostest) from a shell that sourced the devel space, then
-# judges the run by the result files, not by exit codes alone. Usage: run_tests.sh [gtest|pytest|rostest|bench ...]
+# judges the run by the result files, not by exit codes alone.
+# Usage: run_tests.sh [gtest|pytest|rostest|bench|fuzz ...]
 # bench: every `make bench-*` in its quick mode (test/bench), so a broken benchmark fails the run.
+# fuzz: a short pass of every fuzz target.
 set -o pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
 source "$gpl_ws/devel/setup.bash"
 results="$gpl_root/test_results"
 rm -rf "$results"
-mkdir -p "$results/gtest" "$results/pytest" "$results/rostest" "$results/bench"
+mkdir -p "$results/gtest" "$results/pytest" "$results/rostest" "$results/bench" "$results/fuzz"
 suites=("$@")
-((${#suites[@]})) || suites=(gtest pytest rostest bench)
+((${#suites[@]})) || suites=(gtest pytest rostest bench fuzz)
 status=0
 
 run_gtest() {
@@ -42,6 +44,14 @@ run_rostest() {
     echo "== rostest $(basename "$t")"
     rostest --results-base-dir="$results/rostest" grid_puzzle_localization "$(basename "$t")" || status=1
   done
+}
+
+# A short pass of every fuzz target (FUZZ_SECONDS each, default 3) after replaying the inputs fuzzing found.
+run_fuzz() {
+  echo "== fuzz"
+  make -s -C "$gpl_root" fuzz-build >/dev/null || { status=1; return; }
+  "$gpl_root/.venv/bin/python3" "$gpl_root/tools/fuzz.py" --seconds "${FUZZ_SECONDS:-3}" \
+    --junit "$results/fuzz/fuzz.xml" || status=1
 }
 
 for suite in "${suites[@]}"; do "run_$suite"; done

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import sys
 
@@ -52,6 +53,11 @@ def main(argv: list[str] | None = None) -> int:
     except UserError as err:
         print(f"gpm {args.command}: error: {err}", file=sys.stderr)
         return 2
+    except OSError as err:  # the file system's verdict (disk full, permissions): one line, as for bad input
+        where = f" ({err.filename})" if err.filename else ""
+        hint = "; free space there or write elsewhere" if err.errno in (errno.ENOSPC, errno.EDQUOT) else ""
+        print(f"gpm {args.command}: error: {err.strerror or err}{where}{hint}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f"gpm {args.command}: interrupted; no partial output was kept", file=sys.stderr)
         return 130

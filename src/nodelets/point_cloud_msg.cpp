@@ -28,8 +28,15 @@ double readScalar(const std::uint8_t* src, std::uint8_t datatype) {
   return v;
 }
 
-void checkLayout(const sensor_msgs::PointCloud2& msg) {
+std::size_t scalarBytes(std::uint8_t datatype) { return datatype == sensor_msgs::PointField::FLOAT64 ? 8 : 4; }
+
+// `field` is one readScalar reads (FLOAT32, FLOAT64 or UINT32): it must lie inside each point record, so that
+// the data size check below bounds every read (and the point count by the buffer's length).
+void checkLayout(const sensor_msgs::PointCloud2& msg, const sensor_msgs::PointField& field) {
   if (msg.is_bigendian) throw std::invalid_argument("big-endian PointCloud2 is not supported");
+  if (static_cast<std::size_t>(field.offset) + scalarBytes(field.datatype) > msg.point_step)
+    throw std::invalid_argument("PointCloud2 field '" + field.name + "' at offset " + std::to_string(field.offset) +
+                                " does not fit in point_step " + std::to_string(msg.point_step));
   if (msg.row_step < static_cast<std::size_t>(msg.width) * msg.point_step ||
       msg.data.size() < static_cast<std::size_t>(msg.row_step) * msg.height)
     throw std::invalid_argument("PointCloud2 data is shorter than width * height * point_step");
@@ -38,6 +45,7 @@ void checkLayout(const sensor_msgs::PointCloud2& msg) {
 // Calls visit(pointer to the point's first byte) for every point, row by row.
 template <class Visit>
 void forEachPoint(const sensor_msgs::PointCloud2& msg, Visit&& visit) {
+  if (msg.width == 0) return;  // no points, however many (empty) rows the header claims
   for (std::uint32_t row = 0; row < msg.height; ++row) {
     const std::uint8_t* base = msg.data.data() + static_cast<std::size_t>(row) * msg.row_step;
     for (std::uint32_t col = 0; col < msg.width; ++col) visit(base + static_cast<std::size_t>(col) * msg.point_step);
@@ -53,7 +61,7 @@ PointCloud fromMsg(const sensor_msgs::PointCloud2& msg) {
     if (f->datatype != sensor_msgs::PointField::FLOAT32 && f->datatype != sensor_msgs::PointField::FLOAT64)
       throw std::invalid_argument("PointCloud2 field '" + f->name + "' must be FLOAT32 or FLOAT64");
   }
-  checkLayout(msg);
+  for (const auto* f : fields) checkLayout(msg, *f);
   PointCloud cloud;
   cloud.reserve(static_cast<std::size_t>(msg.width) * msg.height);
   forEachPoint(msg, [&](const std::uint8_t* p) {
@@ -73,7 +81,7 @@ std::optional<PointTimes> timesFromMsg(const sensor_msgs::PointCloud2& msg, cons
   else if (f->datatype != sensor_msgs::PointField::FLOAT32 && f->datatype != sensor_msgs::PointField::FLOAT64)
     throw std::invalid_argument("PointCloud2 time field '" + name +
                                 "' must be FLOAT32/FLOAT64 seconds or UINT32 nanoseconds after header.stamp");
-  checkLayout(msg);
+  checkLayout(msg, *f);
   PointTimes times;
   times.reserve(static_cast<std::size_t>(msg.width) * msg.height);
   forEachPoint(msg, [&](const std::uint8_t* p) {

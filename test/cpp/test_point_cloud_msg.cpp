@@ -78,3 +78,30 @@ TEST(PointCloudMsg, MissingTimeFieldIsNoTimesAndAWrongTypeIsAClearError) {
     EXPECT_NE(std::string(e.what()).find("'time'"), std::string::npos) << e.what();
   }
 }
+
+// Layouts the fuzzer (test/fuzz/fuzz_point_cloud_msg.cpp) found: a field reaching past point_step read past the
+// buffer (or, with point_step 0, reserved 2^64 points); width 0 with 4e9 empty rows looped for seconds.
+TEST(PointCloudMsg, FieldsOutsidePointStepAreRefused) {
+  sensor_msgs::PointCloud2 msg = cloud("time", PointField::FLOAT64, kSeconds);
+  msg.point_step = 20;  // the FLOAT64 time field at 16 needs 24
+  EXPECT_NO_THROW(gpl::fromMsg(msg));
+  EXPECT_THROW(gpl::timesFromMsg(msg, "time"), std::invalid_argument);
+  msg.point_step = 8;  // z at 8 needs 12
+  try {
+    gpl::fromMsg(msg);
+    FAIL() << "z outside point_step must be rejected";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("'z'"), std::string::npos) << e.what();
+  }
+  msg.point_step = msg.row_step = 0;
+  msg.width = msg.height = 0xffffffff;
+  EXPECT_THROW(gpl::fromMsg(msg), std::invalid_argument);
+}
+
+TEST(PointCloudMsg, ZeroWidthIsAnEmptyCloudWhateverTheHeight) {
+  sensor_msgs::PointCloud2 msg = cloud("time", PointField::FLOAT32, kSeconds);
+  msg.width = msg.row_step = 0;
+  msg.height = 0xffffffff;
+  EXPECT_TRUE(gpl::fromMsg(msg).empty());
+  EXPECT_TRUE(gpl::timesFromMsg(msg, "time")->empty());
+}

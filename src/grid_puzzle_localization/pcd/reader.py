@@ -8,6 +8,7 @@ infinite x, y or z are dropped and counted, never silently.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import os
 import struct
@@ -23,6 +24,7 @@ from grid_puzzle_localization.pcd.header import PcdHeader, read_pcd_header
 
 XYZ = ("x", "y", "z")
 XYZ_DTYPE = np.dtype([(name, "<f4") for name in XYZ])  # x, y, z as float32: 12 bytes a point
+_LZF_MAX_EXPANSION = 88  # decompressed bytes per compressed byte, at most
 
 
 @dataclass
@@ -145,7 +147,11 @@ def read_compressed(path: str | os.PathLike, h: PcdHeader) -> np.ndarray:
         payload = f.read(compressed_size)
     if len(payload) < compressed_size:
         raise PcdError(f"{path}: truncated: {compressed_size} compressed bytes declared, {len(payload)} present")
-    raw = lzf.decompress(payload, raw_size)
+    # LZF expands 3 bytes to 264 at most: a larger size is corrupt, refused before it is allocated.
+    raw = None
+    if raw_size <= _LZF_MAX_EXPANSION * compressed_size:
+        with contextlib.suppress(ValueError):  # python-lzf's "error in compressed data"
+            raw = lzf.decompress(payload, raw_size)
     if raw is None or len(raw) != raw_size:
         raise PcdError(f"{path}: corrupt binary_compressed data (LZF does not decompress to {raw_size} bytes)")
     out = np.empty(h.points, dtype=h.dtype)

@@ -116,7 +116,7 @@ def read_index_keys(path: Path, chunk_bytes: int = 1 << 20) -> tuple[float, np.n
         if "grid_size" not in header:
             raise ValueError("no grid_size")
         s = check_grid_size(float(header["grid_size"]))
-    except (OSError, ValueError) as err:
+    except (OSError, ValueError, OverflowError, UserError) as err:  # OverflowError: a key beyond int64
         raise UserError(f"{path}: not a readable tile index ({err}); re-run `gpm tile`") from None
     return s, sorted_keys(np.frombuffer(keys, dtype=np.int64).copy())
 

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.tiles.grid import tile_center
+from grid_puzzle_localization.tiles.grid import check_grid_size, tile_center
 from grid_puzzle_localization.util.atomic import atomic_write
 from grid_puzzle_localization.util.iteration import zip_equal
 
@@ -86,14 +86,14 @@ class TileTable:
         """From the parsed ``tiles`` array of an index; KeyError/TypeError when an entry is malformed."""
 
         def column(end: str, axis: int) -> list[float]:
-            return [t["bounds"][end][axis] for t in tiles]
+            return _typed([t["bounds"][end][axis] for t in tiles], (int, float), f"bounds {end}")
 
         return cls(
-            i=[t["key"][0] for t in tiles],
-            j=[t["key"][1] for t in tiles],
-            files=[t["file"] for t in tiles],
-            points=[t["points"] for t in tiles],
-            bytes=[t["bytes"] for t in tiles],
+            i=_typed([t["key"][0] for t in tiles], int, "key"),
+            j=_typed([t["key"][1] for t in tiles], int, "key"),
+            files=_typed([t["file"] for t in tiles], str, "file"),
+            points=_typed([t["points"] for t in tiles], int, "points"),
+            bytes=_typed([t["bytes"] for t in tiles], int, "bytes"),
             lower=[column("min", axis) for axis in range(3)],
             upper=[column("max", axis) for axis in range(3)],
         )
@@ -138,6 +138,14 @@ class TileTable:
             )
             yield (b"," if start else b"") + text.encode()
         yield b"]"
+
+
+def _typed(values: list, kind: type | tuple[type, ...], what: str) -> list:
+    """``values`` when each is a ``kind`` (JSON true/false are not numbers here), else TypeError."""
+    for v in values:
+        if not isinstance(v, kind) or isinstance(v, bool):
+            raise TypeError(f"tile {what} {v!r} has the wrong type")
+    return values
 
 
 @dataclass
@@ -213,7 +221,7 @@ def load_tile_index(directory: str | os.PathLike) -> TileIndex:
         raw = json.loads(path.read_text())
     except FileNotFoundError:
         raise UserError(f"{path}: no tile index; is {directory} the output of `gpm tile`?") from None
-    except (OSError, ValueError) as err:
+    except (OSError, ValueError, RecursionError) as err:  # RecursionError: arrays nested too deep
         raise UserError(f"{path}: not a readable tile index ({err})") from None
     if not isinstance(raw, dict) or raw.get("format") != FORMAT or raw.get("version") != VERSION:
         raise UserError(f"{path}: not a version {VERSION} {FORMAT} index; re-run `gpm tile`")
@@ -221,6 +229,10 @@ def load_tile_index(directory: str | os.PathLike) -> TileIndex:
         table = TileTable.from_json(raw.pop("tiles"))
         for key in ("format", "version"):
             raw.pop(key)
-        return TileIndex(**{**raw, "origin": tuple(raw["origin"])}, table=table, directory=directory)
-    except (KeyError, TypeError) as err:
+        _typed([raw["record_bytes"], raw["points"], raw["nonfinite_dropped"]], int, "count")
+        grid_size = check_grid_size(raw.pop("grid_size"))
+        return TileIndex(
+            **{**raw, "origin": tuple(raw["origin"])}, grid_size=grid_size, table=table, directory=directory
+        )
+    except (KeyError, IndexError, TypeError, ValueError, UserError) as err:
         raise UserError(f"{path}: malformed tile index ({err}); re-run `gpm tile`") from None

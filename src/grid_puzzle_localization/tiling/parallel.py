@@ -13,6 +13,7 @@ import collections
 import contextlib
 import os
 import select
+import signal
 import struct
 import sys
 import traceback
@@ -94,14 +95,21 @@ def in_background(
     # A pipe rather than os.pidfd_open, which Python 3.8 lacks.
     children: dict[int, int] = {}
     try:
-        for job in jobs:
-            read_end, write_end = os.pipe()
-            pid = os.fork()
-            if pid == 0:  # child: never return into the caller's stack
-                os.close(read_end)
-                _run_child(job)
-            os.close(write_end)
-            children[pid] = read_end
+        # SIGINT is blocked while forking: Python runs its at-fork handlers (logging's lock release) with
+        # signals live and prints and drops a KeyboardInterrupt raised there, so a Ctrl-C that hit a
+        # fork was lost and the tiler ran to completion. Unblocked here, the pending signal is raised.
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            for job in jobs:
+                read_end, write_end = os.pipe()
+                pid = os.fork()
+                if pid == 0:  # child: never return into the caller's stack
+                    os.close(read_end)
+                    _run_child(job, mask)
+                os.close(write_end)
+                children[pid] = read_end
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         yield
     finally:
         try:
@@ -131,11 +139,16 @@ def _wait_for(children: dict[int, int], while_waiting: Callable[[], None] | None
     return [codes[pid] for pid in children]
 
 
-def _run_child(job: Callable[[], None]) -> None:
+def _run_child(job: Callable[[], None], mask: Iterable[signal.Signals]) -> None:
     status = 1
     try:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         job()
         status = 0
+    except KeyboardInterrupt:  # Ctrl-C reaches the whole process group: the parent reports it
+        pass
+    except OSError as err:  # disk full, permissions: the parent reports the failure, this says why
+        print(f"tile writer process: {err}", file=sys.stderr)
     except BaseException:
         traceback.print_exc(file=sys.stderr)
     finally:
