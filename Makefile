@@ -95,7 +95,7 @@ bench-global-localization: setup
 # ---------------------------------------------------------------- block maps
 .PHONY: bench-blocks
 bench-blocks: build
-	@$(SETUP) python3 $(ROOT)/bench/bench_blocks.py --repeats 3
+	@$(SETUP) python3 $(ROOT)/bench/bench_blocks.py
 
 # ---------------------------------------------------------------- monitor and experiment
 .PHONY: bench-monitor experiment-paper

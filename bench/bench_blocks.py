@@ -16,9 +16,11 @@ Prints one JSON line. --quick: a synthetic 100 m x 100 m map, one repeat (checks
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import statistics
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -56,7 +58,9 @@ def synthetic_map(tmp: Path) -> tuple[np.ndarray, Path]:
     rng = np.random.default_rng(0)
     points = np.column_stack([rng.uniform(0.0, 4 * TILE, (20_000, 2)), rng.uniform(0.0, 3.0, 20_000)])
     write_pcd(tmp / "synthetic.pcd", xyz_records(points))
-    if gpm(["tile", str(tmp / "synthetic.pcd"), "-o", str(tmp / "tiles"), "--grid-size", f"{TILE:g}"]) != 0:
+    with contextlib.redirect_stdout(sys.stderr):  # stdout holds the JSON line only
+        status = gpm(["tile", str(tmp / "synthetic.pcd"), "-o", str(tmp / "tiles"), "--grid-size", f"{TILE:g}"])
+    if status != 0:
         raise SystemExit("bench_blocks: gpm tile failed on the synthetic map")
     return points, tmp / "tiles"
 
@@ -128,7 +132,8 @@ def main() -> None:
         write_pcd(tmp / "map.pcd", xyz_records(points))
         submap_args = ["submaps", str(tmp / "map.pcd"), str(tmp / "submaps"), "--force"]
         submap_args += ["--side", str(args.side), "--overlap", str(args.overlap)]
-        cut_s, _ = median_seconds(lambda: gpm(submap_args), args.repeats)
+        with contextlib.redirect_stdout(sys.stderr):  # stdout holds the JSON line only
+            cut_s, _ = median_seconds(lambda: gpm(submap_args), args.repeats)
         tree = cKDTree(points[:, :2])
         path = walk(points)
         config = BlockConfig(args.block_size, 0.0, args.voxel)
