@@ -259,7 +259,7 @@ int main(int argc, char** argv) {
         if (!loaded.count(k)) added.push_back({tileId(k), tiles.at(k)});
       for (const TileKey& k : loaded)
         if (!want.count(k)) removed.push_back(tileId(k));
-      loc.map().submit(gpl::MapChange::tiles(loaded.empty(), std::move(added), std::move(removed)));
+      loc.map().submit(gpl::MapChange::tiles(loaded.empty(), 0.0, std::move(added), std::move(removed)));
     }
     loaded = want;
     ++updates;

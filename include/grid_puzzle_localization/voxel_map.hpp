@@ -149,6 +149,16 @@ class VoxelMap {
 /// Identifier of a cloud added with NdtTarget::addTarget (for example a tile index).
 using TargetId = std::uint64_t;
 
+/// Index of a square map tile of side s [m]: tile (i, j) covers [i s, (i + 1) s) x [j s, (j + 1) s).
+struct TileKey {
+  std::int64_t i = 0, j = 0;
+  bool operator==(const TileKey& o) const { return i == o.i && j == o.j; }
+};
+
+/// Voxels along a tile side when `tile_size` is a whole multiple of `resolution` (to 1e-9 relative), else 0.
+/// Only then does every voxel lie in exactly one tile (tile-aligned voxels).
+int voxelsPerTileSide(double tile_size, double resolution);
+
 /// Builds and incrementally updates the NDT target, publishing immutable VoxelMap snapshots.
 ///
 /// Ownership and threads: an NdtTarget is a single-writer object. Call its mutating methods (setTarget,
@@ -171,6 +181,15 @@ class NdtTarget {
   /// Removes the cloud added under `id` exactly (its statistics are subtracted). Returns false if absent.
   bool removeTarget(TargetId id);
   bool hasTarget(TargetId id) const;
+
+  /// Tile-aligned update: adds the points of tile `key` of side `tile_size` [m], which must be a whole
+  /// multiple of the resolution (voxelsPerTileSide > 0; else std::invalid_argument). Every voxel then lies in
+  /// exactly one tile, so nothing is kept per tile: removeTiles drops the tile's voxels. Points whose voxel lies
+  /// outside the tile (a point on the wrong side of a border) are not added; returns their number. The tile
+  /// must not be in the target (remove it first).
+  std::size_t addTile(const TileKey& key, double tile_size, const PointCloud& points);
+  /// Drops every voxel of the tiles `keys` (side `tile_size`, as in addTile).
+  void removeTiles(const std::vector<TileKey>& keys, double tile_size);
   std::vector<TargetId> targetIds() const;  ///< ids currently added, ascending
 
   /// The current snapshot (never null; empty before the first set/add). Thread-safe.
