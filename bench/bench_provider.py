@@ -83,21 +83,24 @@ def route_poses(width: float, height: float, speed: float, rate: float) -> np.nd
 def make_map(directory: Path, width: float, height: float, s: float, points_per_tile: int) -> dict:
     from fixtures.synthetic_tiles import POINT_DTYPE, write_tiles
 
-    from grid_puzzle_localization.tiles.grid import tile_filename, tile_stem
-    from grid_puzzle_localization.tiling.index import TileEntry, TileIndex, write_index
+    from grid_puzzle_localization.tiles.grid import tile_filename
+    from grid_puzzle_localization.tiling.index import TileIndex, TileTable, write_index
 
     ni, nj = math.ceil(width / s), math.ceil(height / s)
     keys = [(i, j) for i in range(ni) for j in range(nj)]
     write_tiles(directory, keys, s, points_per_tile, seed=1)
     size = POINT_DTYPE.itemsize * points_per_tile
-    entries = [
-        TileEntry((i, j), tile_stem(i, j, s), tile_filename(i, j, s), ((i + 0.5) * s, (j + 0.5) * s),
-                  points_per_tile, {"min": [i * s, j * s, -1.0], "max": [(i + 1) * s, (j + 1) * s, 5.0]},
-                  size + 200, size)
-        for i, j in keys
-    ]  # fmt: skip
+    table = TileTable(
+        i=[i for i, _ in keys],
+        j=[j for _, j in keys],
+        files=[tile_filename(i, j, s) for i, j in keys],
+        points=[points_per_tile] * len(keys),
+        bytes=[size + 200] * len(keys),
+        lower=[[i * s for i, _ in keys], [j * s for _, j in keys], [-1.0] * len(keys)],
+        upper=[[(i + 1) * s for i, _ in keys], [(j + 1) * s for _, j in keys], [5.0] * len(keys)],
+    )
     fields = [{"name": n, "size": 4, "type": "F", "count": 1} for n in POINT_DTYPE.names]
-    write_index(directory, TileIndex(s, fields, POINT_DTYPE.itemsize, len(keys) * points_per_tile, 0, [], entries))
+    write_index(directory, TileIndex(s, fields, POINT_DTYPE.itemsize, len(keys) * points_per_tile, 0, [], table))
     disk = sum(f.stat().st_size for f in directory.iterdir())
     return {"width_m": width, "height_m": height, "grid_size_m": s, "points_per_tile": points_per_tile,
             "fields": list(POINT_DTYPE.names), "tiles": len(keys), "disk_mb": round(disk / 2**20, 1)}  # fmt: skip
