@@ -1,0 +1,267 @@
+// Memory and CPU of the localizer as the map grows: the same drive through maps of F times a base map's area
+// (the base repeated on a sqrt(F) x sqrt(F) grid), once with the whole map (global: the PCD read by the map
+// worker, as map_source pcd) and once with a grid puzzle window of tile files read by reference (as
+// map_source tiles). No ROS. Driven by bench/bench_scaling.py, one process per map size and mode so that each
+// peak RSS is that run's alone.
+//
+// Usage:
+//   bench_scaling prepare BASE.pcd FACTOR DIR TILE_SIZE   writes DIR/global.pcd and DIR/tiles/<cx>_<cy>.pcd
+//   bench_scaling run DIR global|tiles TILE_SIZE N K SECONDS
+// `run` prints one JSON object: peak RSS, the map's memory (RSS with the first map minus RSS before it), mean
+// CPU per scan (scan thread, and the whole process including the map worker), map load time and throughput.
+// The drive runs along x through the middle of the first copy at 10 m/s, 10 Hz; scans are the base map's
+// points within 40 m of the pose (every third one, 1 cm noise), made before the clock starts.
+#include <sys/resource.h>
+#include <time.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "grid_puzzle_localization/localizer.hpp"
+#include "grid_puzzle_localization/pcd_reader.hpp"
+#include "tile_files.hpp"
+
+namespace gpl = grid_puzzle_localization;
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr double kRate = 10.0;   // [Hz] scans
+constexpr double kSpeed = 10.0;  // [m/s]
+constexpr float kRange = 40.0f;  // [m] scan radius
+
+double procStatusMb(const char* field) {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  const std::string key = std::string(field) + ":";
+  while (std::getline(in, line))
+    if (line.compare(0, key.size(), key) == 0) return std::atof(line.c_str() + key.size()) / 1024.0;
+  return NAN;
+}
+
+double cpuSeconds(clockid_t clock) {
+  timespec ts{};
+  clock_gettime(clock, &ts);
+  return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+struct Extent {
+  float x0, y0, x1, y1;
+};
+
+Extent extentOf(const gpl::PointCloud& cloud) {
+  Extent e{INFINITY, INFINITY, -INFINITY, -INFINITY};
+  for (const auto& p : cloud) {
+    e.x0 = std::min(e.x0, p.x());
+    e.y0 = std::min(e.y0, p.y());
+    e.x1 = std::max(e.x1, p.x());
+    e.y1 = std::max(e.y1, p.y());
+  }
+  return e;
+}
+
+// Copies are one whole number of tiles apart, so no tile holds points of two copies.
+double period(float lo, float hi, double s) { return std::ceil((hi - lo) / s + 1.0) * s; }
+
+int prepare(const std::string& base_path, int factor, const std::string& dir, double s) {
+  const gpl::PointCloud base = gpl::readPcdXyz(base_path);
+  const int side = static_cast<int>(std::lround(std::sqrt(factor)));
+  if (side * side != factor) throw std::invalid_argument("FACTOR must be a square (1, 4, 16, ...)");
+  const Extent e = extentOf(base);
+  const double px = period(e.x0, e.x1, s), py = period(e.y0, e.y1, s);
+  fs::create_directories(dir + "/tiles");
+  std::ofstream global(dir + "/global.pcd", std::ios::binary);
+  const std::size_t n = base.size() * factor;
+  global << "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH " << n
+         << "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS " << n << "\nDATA binary\n";
+  for (int a = 0; a < side; ++a)
+    for (int b = 0; b < side; ++b) {
+      gpl::PointCloud copy = base;
+      const gpl::Point offset(static_cast<float>(a * px), static_cast<float>(b * py), 0.0f);
+      for (auto& p : copy) p += offset;
+      global.write(reinterpret_cast<const char*>(copy.data()), copy.size() * sizeof(gpl::Point));
+      gpl::test::writeTiles(dir + "/tiles", gpl::test::cutTileStems(copy, s));
+    }
+  if (!global) throw std::runtime_error("cannot write " + dir + "/global.pcd");
+  return 0;
+}
+
+struct TileKeyLess {
+  bool operator()(const gpl::TileKey& a, const gpl::TileKey& b) const { return a.i != b.i ? a.i < b.i : a.j < b.j; }
+};
+using TileSet = std::set<gpl::TileKey, TileKeyLess>;
+
+// The paper's window (Eq. 3 and Table I): a (2n+1)^2 square around the pose's tile, extended by k tiles
+// toward the heading's sector (the same table as provider/window.py).
+TileSet window(const TileSet& existing, double x, double y, double heading, double s, int n, int k) {
+  const long i = static_cast<long>(std::floor(x / s)), j = static_cast<long>(std::floor(y / s));
+  double deg = std::fmod(heading * 180.0 / M_PI + 20.0 + 720.0, 360.0) - 20.0;
+  static const int table[8][5] = {{20, 1, 0, 0, 0},   {70, 1, 0, 1, 0},    {110, 0, 0, 1, 0},  {160, 0, -1, 1, 0},
+                                  {200, 0, -1, 0, 0}, {250, 0, -1, 0, -1}, {290, 0, 0, 0, -1}, {340, 1, 0, 0, -1}};
+  int row = 0;
+  while (row < 7 && deg >= table[row][0]) ++row;
+  const long i0 = i - n + table[row][2] * k, i1 = i + n + table[row][1] * k;
+  const long j0 = j - n + table[row][4] * k, j1 = j + n + table[row][3] * k;
+  TileSet out;
+  for (auto it = existing.lower_bound({i0, j0}); it != existing.end() && it->i <= i1; ++it)
+    if (it->j >= j0 && it->j <= j1) out.insert(*it);
+  return out;
+}
+
+TileSet listTiles(const std::string& dir, double s) {
+  TileSet keys;
+  for (const auto& entry : fs::directory_iterator(dir))
+    if (entry.path().extension() == ".pcd") keys.insert(gpl::tileKeyOfStem(entry.path().stem().string(), s));
+  return keys;
+}
+
+std::string stem(const gpl::TileKey& k, double s) { return gpl::test::tileStem(k.i, k.j, s); }
+
+std::size_t pcdPoints(const std::string& path) {
+  std::ifstream in(path);
+  std::string line;
+  while (std::getline(in, line))
+    if (line.compare(0, 7, "POINTS ") == 0) return std::stoull(line.substr(7));
+  throw std::runtime_error(path + ": no POINTS line");
+}
+
+int run(const std::string& dir, const std::string& mode, double s, int n, int k, double seconds) {
+  const bool tiles = mode == "tiles";
+  if (!tiles && mode != "global") throw std::invalid_argument("mode must be global or tiles");
+  gpl::LocalizerConfig config;
+  config.preprocess.deskew = false;
+  const int scans = static_cast<int>(seconds * kRate);
+  const TileSet existing = listTiles(dir + "/tiles", s);
+  // Along x from 40 m inside the west edge of the first copy (the one with the smallest i), at y = 0: the base
+  // worlds are centred on the origin.
+  const double drive_x0 = existing.begin()->i * s + 40.0, drive_y = 0.0;
+  auto truthAt = [&](double t) {
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+    pose.translation() << drive_x0 + kSpeed * t, drive_y + 3.0 * std::sin(0.2 * t), 1.8;
+    pose.linear() =
+        Eigen::AngleAxisd(std::atan2(0.6 * std::cos(0.2 * t), kSpeed), Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    return pose;
+  };
+  // Scans: the tiles around the drive, read once before the clock starts and dropped after.
+  std::vector<gpl::PointCloud> scan_clouds(scans);
+  {
+    TileSet corridor;
+    for (int c = 0; c < scans; ++c) {
+      const TileSet w = window(existing, truthAt(c / kRate).translation().x(), truthAt(c / kRate).translation().y(),
+                               0.0, s, static_cast<int>(std::ceil(kRange / s)), 0);
+      corridor.insert(w.begin(), w.end());
+    }
+    gpl::PointCloud near;
+    for (const auto& key : corridor) {
+      const gpl::PointCloud t = gpl::readPcdXyz(dir + "/tiles/" + stem(key, s) + ".pcd");
+      near.insert(near.end(), t.begin(), t.end());
+    }
+    std::mt19937 rng(7);
+    std::normal_distribution<float> noise(0.0f, 0.01f);
+    for (int c = 0; c < scans; ++c) {
+      const Eigen::Isometry3f inv = truthAt(c / kRate).inverse().cast<float>();
+      for (std::size_t p = c % 3; p < near.size(); p += 3) {
+        const gpl::Point q = inv * near[p];
+        if (q.norm() < kRange) scan_clouds[c].push_back(q + gpl::Point(noise(rng), noise(rng), noise(rng)));
+      }
+    }
+  }
+
+  const double rss_before = procStatusMb("VmRSS");
+  gpl::Localizer loc(config);
+  TileSet loaded;
+  Eigen::Vector2d anchor(NAN, NAN);
+  double heading = 0.0;
+  std::size_t updates = 0;
+  auto follow = [&](const Eigen::Vector3d& at, bool first) {
+    if (!first && (at.head<2>() - anchor).norm() <= s / 2) return;  // the s/2 update rule
+    if (!first) heading = std::atan2(at.y() - anchor.y(), at.x() - anchor.x());
+    anchor = at.head<2>();
+    const TileSet want = window(existing, at.x(), at.y(), heading, s, n, k);
+    const Eigen::Vector2d ahead = anchor + 1.01 * (s / 2) * Eigen::Vector2d(std::cos(heading), std::sin(heading));
+    gpl::TileFileChange change;
+    change.dir = dir + "/tiles";
+    change.index_revision = "1";
+    change.reset = first;
+    for (const auto& key : want)
+      if (!loaded.count(key)) change.added.push_back(stem(key, s));
+    for (const auto& key : loaded)
+      if (!want.count(key)) change.removed.push_back(stem(key, s));
+    for (const auto& key : window(existing, ahead.x(), ahead.y(), heading, s, n, k))
+      if (!want.count(key)) change.prefetch.push_back(stem(key, s));
+    loc.map().submit(gpl::MapChange::tileFiles(s, std::move(change)));
+    loaded = want;
+    ++updates;
+  };
+  const auto load_start = std::chrono::steady_clock::now();
+  if (tiles)
+    follow(truthAt(0.0).translation(), true);
+  else
+    loc.map().submit(gpl::MapChange::pcdFile(dir + "/global.pcd"));
+  loc.map().waitIdle();
+  const double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count();
+  const gpl::MapUpdateStats first = loc.map().stats();
+  for (const std::string& e : loc.map().takeErrors()) std::fprintf(stderr, "bench_scaling: %s\n", e.c_str());
+  const double rss_map = procStatusMb("VmRSS");
+
+  loc.setInitialPose(truthAt(0.0));
+  double scan_cpu = 0.0, worst_error = 0.0;
+  int tracked = 0;
+  const double process_cpu_start = cpuSeconds(CLOCK_PROCESS_CPUTIME_ID);
+  for (int c = 0; c < scans; ++c) {
+    const double t = c / kRate;
+    if (tiles) follow(truthAt(t).translation(), false);
+    const double cpu0 = cpuSeconds(CLOCK_THREAD_CPUTIME_ID);
+    const gpl::LocalizerOutput out = loc.processScan(t, scan_clouds[c], Eigen::Isometry3d::Identity());
+    scan_cpu += cpuSeconds(CLOCK_THREAD_CPUTIME_ID) - cpu0;
+    if (out.state == gpl::LocalizerState::kTracking && out.match_accepted) {
+      ++tracked;
+      worst_error = std::max(worst_error, (out.pose.translation() - truthAt(t).translation()).norm());
+    }
+    scan_clouds[c] = gpl::PointCloud();  // a scan is dropped once used, as a driver's message would be
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));  // leave the worker its slot, as between scans
+  }
+  loc.map().waitIdle();
+  const double process_cpu = cpuSeconds(CLOCK_PROCESS_CPUTIME_ID) - process_cpu_start;
+  const gpl::MapUpdateStats st = loc.map().stats();
+  const double load_points = tiles ? static_cast<double>(st.tile_points_read) : static_cast<double>(first.points);
+  const double load_ms = tiles ? st.tile_read_ms + st.tile_fold_ms : first.update_ms;
+  std::printf(
+      "{\"mode\": \"%s\", \"map_points\": %zu, \"target_points_first\": %zu, \"target_voxels_first\": %zu, "
+      "\"tile_aligned\": %s, \"peak_rss_mb\": %.1f, \"rss_before_map_mb\": %.1f, \"map_memory_mb\": %.1f, "
+      "\"first_map_s\": %.3f, \"scans\": %d, \"tracked\": %d, \"worst_error_m\": %.4f, "
+      "\"scan_cpu_ms_mean\": %.2f, \"process_cpu_ms_per_scan\": %.2f, \"map_updates\": %zu, \"tiles_read\": %zu, "
+      "\"cache_hits\": %zu, \"load_points\": %.0f, \"load_ms\": %.1f, \"load_mpoints_per_s\": %.2f}\n",
+      mode.c_str(), pcdPoints(dir + "/global.pcd"), first.points, first.voxels, st.tile_aligned ? "true" : "false",
+      procStatusMb("VmHWM"), rss_before, rss_map - rss_before, load_s, scans, tracked, worst_error,
+      1e3 * scan_cpu / scans, 1e3 * process_cpu / scans, updates, st.tiles_read, st.cache_hits, load_points, load_ms,
+      load_ms > 0 ? load_points / load_ms / 1e3 : 0.0);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    const std::string cmd = argc > 1 ? argv[1] : "";
+    if (cmd == "prepare" && argc == 6) return prepare(argv[2], std::atoi(argv[3]), argv[4], std::atof(argv[5]));
+    if (cmd == "run" && argc == 8)
+      return run(argv[2], argv[3], std::atof(argv[4]), std::atoi(argv[5]), std::atoi(argv[6]), std::atof(argv[7]));
+    std::fprintf(stderr,
+                 "usage: bench_scaling prepare BASE.pcd FACTOR DIR TILE_SIZE\n"
+                 "       bench_scaling run DIR global|tiles TILE_SIZE N K SECONDS\n");
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_scaling: %s\n", e.what());
+    return 1;
+  }
+}
