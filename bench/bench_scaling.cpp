@@ -12,6 +12,7 @@
 // The drive runs along x through the middle of the first copy at 10 m/s, 10 Hz; scans are the base map's
 // points within 40 m of the pose (every third one, 1 cm noise), made before the clock starts.
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <time.h>
 
 #include <chrono>
@@ -92,6 +93,7 @@ int prepare(const std::string& base_path, int factor, const std::string& dir, do
       gpl::test::writeTiles(dir + "/tiles", gpl::test::cutTileStems(copy, s));
     }
   if (!global) throw std::runtime_error("cannot write " + dir + "/global.pcd");
+  std::ofstream(dir + "/extent.txt") << e.x0 << ' ' << e.y0 << ' ' << e.x1 << ' ' << e.y1 << '\n';  // of the base
   return 0;
 }
 
@@ -100,31 +102,31 @@ struct TileKeyLess {
 };
 using TileSet = std::set<gpl::TileKey, TileKeyLess>;
 
+std::string stem(const gpl::TileKey& k, double s) { return gpl::test::tileStem(k.i, k.j, s); }
+
+bool tileExists(const std::string& tile_dir, const gpl::TileKey& k, double s) {
+  struct stat st;
+  return ::stat((tile_dir + "/" + stem(k, s) + ".pcd").c_str(), &st) == 0;
+}
+
 // The paper's window (Eq. 3 and Table I): a (2n+1)^2 square around the pose's tile, extended by k tiles
-// toward the heading's sector (the same table as provider/window.py).
-TileSet window(const TileSet& existing, double x, double y, double heading, double s, int n, int k) {
+// toward the heading's sector (the same table as provider/window.py), holding the tiles whose file exists.
+// Existence is asked of the file system for tiles not in `known` (the provider keeps the key list of the whole
+// map instead; here that list would count against the localizer's memory, which is what is measured).
+TileSet window(const std::string& tile_dir, const TileSet& known, double x, double y, double heading, double s, int n,
+               int k) {
   const long i = static_cast<long>(std::floor(x / s)), j = static_cast<long>(std::floor(y / s));
-  double deg = std::fmod(heading * 180.0 / M_PI + 20.0 + 720.0, 360.0) - 20.0;
+  const double deg = std::fmod(heading * 180.0 / M_PI + 20.0 + 720.0, 360.0) - 20.0;
   static const int table[8][5] = {{20, 1, 0, 0, 0},   {70, 1, 0, 1, 0},    {110, 0, 0, 1, 0},  {160, 0, -1, 1, 0},
                                   {200, 0, -1, 0, 0}, {250, 0, -1, 0, -1}, {290, 0, 0, 0, -1}, {340, 1, 0, 0, -1}};
   int row = 0;
   while (row < 7 && deg >= table[row][0]) ++row;
-  const long i0 = i - n + table[row][2] * k, i1 = i + n + table[row][1] * k;
-  const long j0 = j - n + table[row][4] * k, j1 = j + n + table[row][3] * k;
   TileSet out;
-  for (auto it = existing.lower_bound({i0, j0}); it != existing.end() && it->i <= i1; ++it)
-    if (it->j >= j0 && it->j <= j1) out.insert(*it);
+  for (long u = i - n + table[row][2] * k; u <= i + n + table[row][1] * k; ++u)
+    for (long v = j - n + table[row][4] * k; v <= j + n + table[row][3] * k; ++v)
+      if (known.count({u, v}) || tileExists(tile_dir, {u, v}, s)) out.insert({u, v});
   return out;
 }
-
-TileSet listTiles(const std::string& dir, double s) {
-  TileSet keys;
-  for (const auto& entry : fs::directory_iterator(dir))
-    if (entry.path().extension() == ".pcd") keys.insert(gpl::tileKeyOfStem(entry.path().stem().string(), s));
-  return keys;
-}
-
-std::string stem(const gpl::TileKey& k, double s) { return gpl::test::tileStem(k.i, k.j, s); }
 
 std::size_t pcdPoints(const std::string& path) {
   std::ifstream in(path);
@@ -140,10 +142,11 @@ int run(const std::string& dir, const std::string& mode, double s, int n, int k,
   gpl::LocalizerConfig config;
   config.preprocess.deskew = false;
   const int scans = static_cast<int>(seconds * kRate);
-  const TileSet existing = listTiles(dir + "/tiles", s);
-  // Along x from 40 m inside the west edge of the first copy (the one with the smallest i), at y = 0: the base
-  // worlds are centred on the origin.
-  const double drive_x0 = existing.begin()->i * s + 40.0, drive_y = 0.0;
+  const std::string tile_dir = dir + "/tiles";
+  // Along x from 40 m inside the west edge of the base map (the first copy), at mid-height.
+  double x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  std::ifstream(dir + "/extent.txt") >> x0 >> y0 >> x1 >> y1;
+  const double drive_x0 = x0 + 40.0, drive_y = 0.5 * (y0 + y1);
   auto truthAt = [&](double t) {
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
     pose.translation() << drive_x0 + kSpeed * t, drive_y + 3.0 * std::sin(0.2 * t), 1.8;
@@ -156,13 +159,13 @@ int run(const std::string& dir, const std::string& mode, double s, int n, int k,
   {
     TileSet corridor;
     for (int c = 0; c < scans; ++c) {
-      const TileSet w = window(existing, truthAt(c / kRate).translation().x(), truthAt(c / kRate).translation().y(),
-                               0.0, s, static_cast<int>(std::ceil(kRange / s)), 0);
+      const Eigen::Vector3d at = truthAt(c / kRate).translation();
+      const TileSet w = window(tile_dir, corridor, at.x(), at.y(), 0.0, s, static_cast<int>(std::ceil(kRange / s)), 0);
       corridor.insert(w.begin(), w.end());
     }
     gpl::PointCloud near;
     for (const auto& key : corridor) {
-      const gpl::PointCloud t = gpl::readPcdXyz(dir + "/tiles/" + stem(key, s) + ".pcd");
+      const gpl::PointCloud t = gpl::readPcdXyz(tile_dir + "/" + stem(key, s) + ".pcd");
       near.insert(near.end(), t.begin(), t.end());
     }
     std::mt19937 rng(7);
@@ -186,17 +189,17 @@ int run(const std::string& dir, const std::string& mode, double s, int n, int k,
     if (!first && (at.head<2>() - anchor).norm() <= s / 2) return;  // the s/2 update rule
     if (!first) heading = std::atan2(at.y() - anchor.y(), at.x() - anchor.x());
     anchor = at.head<2>();
-    const TileSet want = window(existing, at.x(), at.y(), heading, s, n, k);
+    const TileSet want = window(tile_dir, loaded, at.x(), at.y(), heading, s, n, k);
     const Eigen::Vector2d ahead = anchor + 1.01 * (s / 2) * Eigen::Vector2d(std::cos(heading), std::sin(heading));
     gpl::TileFileChange change;
-    change.dir = dir + "/tiles";
+    change.dir = tile_dir;
     change.index_revision = "1";
     change.reset = first;
     for (const auto& key : want)
       if (!loaded.count(key)) change.added.push_back(stem(key, s));
     for (const auto& key : loaded)
       if (!want.count(key)) change.removed.push_back(stem(key, s));
-    for (const auto& key : window(existing, ahead.x(), ahead.y(), heading, s, n, k))
+    for (const auto& key : window(tile_dir, want, ahead.x(), ahead.y(), heading, s, n, k))
       if (!want.count(key)) change.prefetch.push_back(stem(key, s));
     loc.map().submit(gpl::MapChange::tileFiles(s, std::move(change)));
     loaded = want;
