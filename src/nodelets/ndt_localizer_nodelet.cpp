@@ -102,6 +102,11 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       case TileDeltaSequence::Verdict::kApply:
         break;
     }
+    if (voxelsPerTileSide(msg->grid_size, params_.core.ndt.resolution) == 0)
+      NODELET_WARN_ONCE(
+          "tile side %g m is not a whole multiple of ~ndt/resolution %g m: voxels straddle tiles, so each tile's "
+          "statistics are kept as well (more memory per voxel); use a resolution that divides the tile side",
+          msg->grid_size, params_.core.ndt.resolution);
     if (by_reference) {  // the map worker reads the files
       localizer_->map().submit(MapChange::tileFiles(
           msg->grid_size,
