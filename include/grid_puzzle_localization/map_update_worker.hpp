@@ -121,7 +121,9 @@ class MapUpdateWorker {
   // Tiles mode bookkeeping shared by both tile sources.
   void startTiles(NdtTarget& target, bool reset, double grid_size);
   void removeTiles(NdtTarget& target, const std::vector<std::string>& ids);
-  void addTile(NdtTarget& target, const std::string& id, const PointCloud& points);
+  // Adds tiles (id, points) as one target update when tile-aligned; a bad id goes to `failures`.
+  void addTiles(NdtTarget& target, const std::vector<std::pair<std::string, const PointCloud*>>& batch,
+                std::vector<std::string>& failures);
   PointCloud readTile(const std::string& path);  // counts into stats_
   void readAhead();                              // prefetch while nothing is queued
 

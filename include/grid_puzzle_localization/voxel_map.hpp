@@ -188,6 +188,8 @@ class NdtTarget {
   /// outside the tile (a point on the wrong side of a border) are not added; returns their number. The tile
   /// must not be in the target (remove it first).
   std::size_t addTile(const TileKey& key, double tile_size, const PointCloud& points);
+  /// addTile of several tiles (distinct keys) as one update: each touched shard is copied once, not once per tile.
+  std::size_t addTiles(const std::vector<std::pair<TileKey, const PointCloud*>>& tiles, double tile_size);
   /// Drops every voxel of the tiles `keys` (side `tile_size`, as in addTile).
   void removeTiles(const std::vector<TileKey>& keys, double tile_size);
   std::vector<TargetId> targetIds() const;  ///< ids currently added, ascending

@@ -136,6 +136,8 @@ double msSince(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
+constexpr std::size_t kFoldBatchPoints = 1 << 21;  // ~2 M points, 24 MB of x y z waiting to be folded
+
 bool isDirectory(const std::string& path) {
   struct stat st;
   return ::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode);
@@ -156,12 +158,10 @@ void MapUpdateWorker::apply(NdtTarget& target, const MapChange& change, std::vec
     case MapChange::Kind::kTiles:
       startTiles(target, change.reset, change.grid_size);
       removeTiles(target, change.removed);
-      for (const TileCloud& tile : change.added) {
-        try {
-          addTile(target, tile.id, tile.points);
-        } catch (const std::invalid_argument& e) {
-          failures.emplace_back(e.what());
-        }
+      {
+        std::vector<std::pair<std::string, const PointCloud*>> batch;
+        for (const TileCloud& tile : change.added) batch.emplace_back(tile.id, &tile.points);
+        addTiles(target, batch, failures);
       }
       break;
     case MapChange::Kind::kTileFiles:
@@ -198,17 +198,31 @@ void MapUpdateWorker::removeTiles(NdtTarget& target, const std::vector<std::stri
   if (!aligned.empty()) target.removeTiles(aligned, tile_size_);
 }
 
-void MapUpdateWorker::addTile(NdtTarget& target, const std::string& id, const PointCloud& points) {
-  if (tiles_.count(id)) removeTiles(target, {id});
-  LoadedTile tile;
-  if (aligned_) {
-    tile.key = tileKeyOfStem(id, tile_size_);
-    totals_.points_outside += target.addTile(tile.key, tile_size_, points);
-  } else {
-    tile.id = next_id_++;
-    target.addTarget(tile.id, points);
+void MapUpdateWorker::addTiles(NdtTarget& target, const std::vector<std::pair<std::string, const PointCloud*>>& batch,
+                               std::vector<std::string>& failures) {
+  std::vector<std::string> reloaded;
+  for (const auto& tile : batch)
+    if (tiles_.count(tile.first)) reloaded.push_back(tile.first);
+  removeTiles(target, reloaded);
+  std::vector<std::pair<TileKey, const PointCloud*>> aligned;
+  for (const auto& [id, points] : batch) {
+    if (tiles_.count(id)) continue;  // twice in one batch: the first copy counts
+    LoadedTile tile;
+    try {
+      if (aligned_) {
+        tile.key = tileKeyOfStem(id, tile_size_);
+        aligned.emplace_back(tile.key, points);
+      } else {
+        tile.id = next_id_++;
+        target.addTarget(tile.id, *points);
+      }
+    } catch (const std::invalid_argument& e) {
+      failures.emplace_back(e.what());
+      continue;
+    }
+    tiles_.emplace(id, tile);
   }
-  tiles_.emplace(id, tile);
+  if (!aligned.empty()) totals_.points_outside += target.addTiles(aligned, tile_size_);
 }
 
 PointCloud MapUpdateWorker::readTile(const std::string& path) {
@@ -236,6 +250,19 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
   index_revision_ = change.index_revision;
   prefetch_.assign(change.prefetch.rbegin(), change.prefetch.rend());  // read from the back: first id first
   removeTiles(target, change.removed);
+  // Tiles are folded in batches of about kFoldBatchPoints: one target update (each touched shard copied once) per
+  // batch instead of per tile, while the points waiting to be folded stay bounded.
+  std::vector<std::pair<std::string, PointCloud>> pending;
+  std::size_t pending_points = 0;
+  const auto fold = [&] {
+    std::vector<std::pair<std::string, const PointCloud*>> batch;
+    for (const auto& tile : pending) batch.emplace_back(tile.first, &tile.second);
+    const auto start = Clock::now();
+    addTiles(target, batch, failures);
+    totals_.tile_fold_ms += msSince(start);
+    pending.clear();
+    pending_points = 0;
+  };
   for (const std::string& id : change.added) {
     const std::string path = change.dir + "/" + id + ".pcd";
     try {
@@ -244,13 +271,14 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
         ++totals_.cache_hits;
       else
         points = readTile(path);
-      const auto start = Clock::now();
-      addTile(target, id, *points);
-      totals_.tile_fold_ms += msSince(start);
-    } catch (const std::exception& e) {  // PcdReadError names the file; a bad id is named by tileKeyOfStem
+      pending_points += points->size();
+      pending.emplace_back(id, std::move(*points));
+    } catch (const std::exception& e) {  // PcdReadError names the file
       failures.push_back("tile " + id + " skipped: " + e.what());
     }
+    if (pending_points >= kFoldBatchPoints) fold();
   }
+  fold();
 }
 
 void MapUpdateWorker::readAhead() {

@@ -289,26 +289,35 @@ int checkedVoxelsPerTile(double tile_size, double resolution) {
 }  // namespace
 
 std::size_t NdtTarget::addTile(const TileKey& key, double tile_size, const PointCloud& points) {
+  return addTiles({{key, &points}}, tile_size);
+}
+
+std::size_t NdtTarget::addTiles(const std::vector<std::pair<TileKey, const PointCloud*>>& tiles, double tile_size) {
   const std::int64_t m = checkedVoxelsPerTile(tile_size, params_.resolution);
   const double inv = 1.0 / params_.resolution;
   // The same voxel index as voxelStatistics computes, so the owner test agrees with the voxel a point lands in.
-  const auto inside = [&](const Point& p) {
+  const auto inside = [&](const Point& p, const TileKey& key) {
     const Eigen::Vector3d d = p.cast<double>();
     return floorDiv(static_cast<std::int32_t>(std::floor(d.x() * inv)), m) == key.i &&
            floorDiv(static_cast<std::int32_t>(std::floor(d.y() * inv)), m) == key.j;
   };
+  std::size_t total = 0;
+  for (const auto& tile : tiles) total += tile.second->size();
+  // One cloud, tile after tile in their own order: a voxel's points are summed in the order of its tile's file,
+  // as in a from-scratch build of the same tiles.
+  PointCloud kept;
+  kept.reserve(total);
   std::size_t outside = 0;
-  for (const Point& p : points) outside += p.allFinite() && !inside(p);
-  Delta delta;
-  if (outside == 0) {
-    delta = voxelStatistics(points, params_.resolution, params_.threads);
-  } else {
-    PointCloud kept;
-    kept.reserve(points.size() - outside);
-    for (const Point& p : points)
-      if (p.allFinite() && inside(p)) kept.push_back(p);
-    delta = voxelStatistics(kept, params_.resolution, params_.threads);
-  }
+  for (const auto& [key, points] : tiles)
+    for (const Point& p : *points) {
+      if (!p.allFinite()) continue;
+      if (inside(p, key))
+        kept.push_back(p);
+      else
+        ++outside;
+    }
+  const Delta delta = voxelStatistics(kept, params_.resolution, params_.threads);
+  kept = PointCloud();
   apply(delta, false, current_);
   return outside;
 }
