@@ -7,6 +7,7 @@
 // Usage:
 //   bench_scaling prepare BASE.pcd FACTOR DIR TILE_SIZE   writes DIR/global.pcd and DIR/tiles/<cx>_<cy>.pcd
 //   bench_scaling run DIR global|tiles TILE_SIZE N K SECONDS
+//   bench_scaling load DIR TILE_SIZE REPEATS   every tile of DIR/tiles into an empty target, one map thread
 // `run` prints one JSON object: peak RSS, the map's memory (RSS with the first map minus RSS before it), mean
 // CPU per scan (scan thread, and the whole process including the map worker), map load time and throughput.
 // The drive runs along x through the middle of the first copy at 10 m/s, 10 Hz; scans are the base map's
@@ -15,6 +16,7 @@
 #include <sys/stat.h>
 #include <time.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -143,18 +145,19 @@ int run(const std::string& dir, const std::string& mode, double s, int n, int k,
   config.preprocess.deskew = false;
   const int scans = static_cast<int>(seconds * kRate);
   const std::string tile_dir = dir + "/tiles";
-  // Along x from 40 m inside the west edge of the base map (the first copy), at mid-height.
+  // From 40 m inside the west edge of the base map (the first copy), at mid-height, heading 30 degrees.
   double x0 = 0, y0 = 0, x1 = 0, y1 = 0;
   std::ifstream(dir + "/extent.txt") >> x0 >> y0 >> x1 >> y1;
-  const double drive_x0 = x0 + 40.0, drive_y = 0.5 * (y0 + y1);
+  const Eigen::Vector3d start(x0 + 40.0, 0.5 * (y0 + y1), 1.8);
+  const double yaw = M_PI / 6;
   auto truthAt = [&](double t) {
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-    pose.translation() << drive_x0 + kSpeed * t, drive_y + 3.0 * std::sin(0.2 * t), 1.8;
-    pose.linear() =
-        Eigen::AngleAxisd(std::atan2(0.6 * std::cos(0.2 * t), kSpeed), Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    pose.translation() = start + kSpeed * t * Eigen::Vector3d(std::cos(yaw), std::sin(yaw), 0.0);
+    pose.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
     return pose;
   };
-  // Scans: the tiles around the drive, read once before the clock starts and dropped after.
+  // Scans: the base map's points around the drive (the same at every map size), read from the tiles once before
+  // the clock starts and dropped after.
   std::vector<gpl::PointCloud> scan_clouds(scans);
   {
     TileSet corridor;
@@ -165,8 +168,8 @@ int run(const std::string& dir, const std::string& mode, double s, int n, int k,
     }
     gpl::PointCloud near;
     for (const auto& key : corridor) {
-      const gpl::PointCloud t = gpl::readPcdXyz(tile_dir + "/" + stem(key, s) + ".pcd");
-      near.insert(near.end(), t.begin(), t.end());
+      for (const gpl::Point& p : gpl::readPcdXyz(tile_dir + "/" + stem(key, s) + ".pcd"))
+        if (p.x() >= x0 && p.x() <= x1 && p.y() >= y0 && p.y() <= y1) near.push_back(p);
     }
     std::mt19937 rng(7);
     std::normal_distribution<float> noise(0.0f, 0.01f);
@@ -251,6 +254,41 @@ int run(const std::string& dir, const std::string& mode, double s, int n, int k,
   return 0;
 }
 
+// Loading throughput: all tile files of a directory read and folded by a fresh map worker (one OpenMP thread),
+// the median of REPEATS runs (the files are in the page cache after the first).
+int load(const std::string& dir, double s, int repeats) {
+  gpl::TileFileChange change;
+  change.dir = dir + "/tiles";
+  change.index_revision = "1";
+  change.reset = true;
+  for (const auto& entry : fs::directory_iterator(change.dir))
+    if (entry.path().extension() == ".pcd") change.added.push_back(entry.path().stem().string());
+  std::vector<double> read_ms, fold_ms;
+  std::size_t points = 0;
+  for (int r = 0; r < repeats; ++r) {
+    gpl::VoxelMapParams params;
+    params.threads = 1;
+    gpl::MapUpdateWorker worker(params);
+    worker.submit(gpl::MapChange::tileFiles(s, change));
+    worker.waitIdle();
+    const gpl::MapUpdateStats st = worker.stats();
+    for (const std::string& e : worker.takeErrors()) std::fprintf(stderr, "bench_scaling: %s\n", e.c_str());
+    read_ms.push_back(st.tile_read_ms);
+    fold_ms.push_back(st.tile_fold_ms);
+    points = st.tile_points_read;
+  }
+  std::sort(read_ms.begin(), read_ms.end());
+  std::sort(fold_ms.begin(), fold_ms.end());
+  const double read = read_ms[read_ms.size() / 2], fold = fold_ms[fold_ms.size() / 2];
+  std::printf(
+      "{\"mode\": \"load\", \"tiles\": %zu, \"points\": %zu, \"points_per_tile\": %.0f, \"repeats\": %d, "
+      "\"read_ms_median\": %.1f, \"fold_ms_median\": %.1f, \"read_mpoints_per_s\": %.2f, "
+      "\"fold_mpoints_per_s\": %.2f, \"load_mpoints_per_s\": %.2f, \"threads\": 1}\n",
+      change.added.size(), points, static_cast<double>(points) / change.added.size(), repeats, read, fold,
+      points / read / 1e3, points / fold / 1e3, points / (read + fold) / 1e3);
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -259,9 +297,11 @@ int main(int argc, char** argv) {
     if (cmd == "prepare" && argc == 6) return prepare(argv[2], std::atoi(argv[3]), argv[4], std::atof(argv[5]));
     if (cmd == "run" && argc == 8)
       return run(argv[2], argv[3], std::atof(argv[4]), std::atoi(argv[5]), std::atoi(argv[6]), std::atof(argv[7]));
+    if (cmd == "load" && argc == 5) return load(argv[2], std::atof(argv[3]), std::atoi(argv[4]));
     std::fprintf(stderr,
                  "usage: bench_scaling prepare BASE.pcd FACTOR DIR TILE_SIZE\n"
-                 "       bench_scaling run DIR global|tiles TILE_SIZE N K SECONDS\n");
+                 "       bench_scaling run DIR global|tiles TILE_SIZE N K SECONDS\n"
+                 "       bench_scaling load DIR TILE_SIZE REPEATS\n");
     return 2;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_scaling: %s\n", e.what());
