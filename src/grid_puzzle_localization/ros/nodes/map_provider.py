@@ -165,6 +165,8 @@ class MapProviderNode:
                 self.tiles.revision,
             )
             self.send_reset(self.delta_pub.publish, increment=True)
+            if self.map_cloud is not None:
+                self.map_cloud.changed(rospy.Time.now())
 
     def _serve(self, pose: PoseSample, window: Window, start: float) -> None:
         """Publishes the change of the window; ``start``: perf_counter() when the update began."""
