@@ -5,13 +5,14 @@
 // peak RSS is that run's alone.
 //
 // Usage:
-//   bench_scaling prepare BASE.pcd FACTOR DIR TILE_SIZE   writes DIR/global.pcd and DIR/tiles/<cx>_<cy>.pcd
+//   bench_scaling prepare BASE.pcd FACTOR DIR TILE_SIZE SECONDS
+//       writes DIR/global.pcd, DIR/tiles/<cx>_<cy>.pcd and the drive's scans (DIR/scans.bin)
 //   bench_scaling run DIR global|tiles TILE_SIZE N K SECONDS
 //   bench_scaling load DIR TILE_SIZE REPEATS   every tile of DIR/tiles into an empty target, one map thread
 // `run` prints one JSON object: peak RSS, the map's memory (RSS with the first map minus RSS before it), mean
 // CPU per scan (scan thread, and the whole process including the map worker), map load time and throughput.
-// The drive runs along x through the middle of the first copy at 10 m/s, 10 Hz; scans are the base map's
-// points within 40 m of the pose (every third one, 1 cm noise), made before the clock starts.
+// The drive runs through the first copy at 10 m/s, 10 Hz; scans are the base map's points within 40 m of the pose
+// (every third one, 1 cm noise), made by `prepare` and read one at a time by `run`.
 #include <sys/resource.h>
 #include <sys/stat.h>
 #include <time.h>
@@ -19,6 +20,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -72,10 +74,56 @@ Extent extentOf(const gpl::PointCloud& cloud) {
   return e;
 }
 
+// The drive: from 40 m inside the west edge of the base map (the first copy), at mid-height, heading 30 degrees.
+Eigen::Isometry3d drivePose(const Extent& base, double t) {
+  const double yaw = M_PI / 6;
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.translation() = Eigen::Vector3d(base.x0 + 40.0, 0.5 * (base.y0 + base.y1), 1.8) +
+                       kSpeed * t * Eigen::Vector3d(std::cos(yaw), std::sin(yaw), 0.0);
+  pose.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  return pose;
+}
+
+// Scans of the drive cut from the base map (every third point within kRange, 1 cm noise), written to `path` as
+// u64 count then count x y z float32 per scan: the run reads them one at a time, outside its memory and clock.
+void writeScans(const gpl::PointCloud& base, const Extent& e, double seconds, const std::string& path) {
+  std::ofstream out(path, std::ios::binary);
+  std::mt19937 rng(7);
+  std::normal_distribution<float> noise(0.0f, 0.01f);
+  const int scans = static_cast<int>(seconds * kRate);
+  const Eigen::Vector3d a = drivePose(e, 0.0).translation(), b = drivePose(e, seconds).translation();
+  gpl::PointCloud corridor;  // the points any scan can reach
+  for (const gpl::Point& p : base)
+    if (p.x() >= std::min(a.x(), b.x()) - kRange && p.x() <= std::max(a.x(), b.x()) + kRange &&
+        p.y() >= std::min(a.y(), b.y()) - kRange && p.y() <= std::max(a.y(), b.y()) + kRange)
+      corridor.push_back(p);
+  for (int c = 0; c < scans; ++c) {
+    const Eigen::Isometry3f inv = drivePose(e, c / kRate).inverse().cast<float>();
+    gpl::PointCloud scan;
+    for (std::size_t p = c % 3; p < corridor.size(); p += 3) {
+      const gpl::Point q = inv * corridor[p];
+      if (q.norm() < kRange) scan.push_back(q + gpl::Point(noise(rng), noise(rng), noise(rng)));
+    }
+    const std::uint64_t n = scan.size();
+    out.write(reinterpret_cast<const char*>(&n), sizeof n);
+    out.write(reinterpret_cast<const char*>(scan.data()), n * sizeof(gpl::Point));
+  }
+  if (!out) throw std::runtime_error("cannot write " + path);
+}
+
+gpl::PointCloud readScan(std::ifstream& in) {
+  std::uint64_t n = 0;
+  in.read(reinterpret_cast<char*>(&n), sizeof n);
+  gpl::PointCloud scan(n);
+  in.read(reinterpret_cast<char*>(scan.data()), n * sizeof(gpl::Point));
+  if (!in) throw std::runtime_error("scans file ends early");
+  return scan;
+}
+
 // Copies are one whole number of tiles apart, so no tile holds points of two copies.
 double period(float lo, float hi, double s) { return std::ceil((hi - lo) / s + 1.0) * s; }
 
-int prepare(const std::string& base_path, int factor, const std::string& dir, double s) {
+int prepare(const std::string& base_path, int factor, const std::string& dir, double s, double seconds) {
   const gpl::PointCloud base = gpl::readPcdXyz(base_path);
   const int side = static_cast<int>(std::lround(std::sqrt(factor)));
   if (side * side != factor) throw std::invalid_argument("FACTOR must be a square (1, 4, 16, ...)");
@@ -96,6 +144,7 @@ int prepare(const std::string& base_path, int factor, const std::string& dir, do
     }
   if (!global) throw std::runtime_error("cannot write " + dir + "/global.pcd");
   std::ofstream(dir + "/extent.txt") << e.x0 << ' ' << e.y0 << ' ' << e.x1 << ' ' << e.y1 << '\n';  // of the base
+  writeScans(base, e, seconds, dir + "/scans.bin");
   return 0;
 }
 
@@ -145,42 +194,10 @@ int run(const std::string& dir, const std::string& mode, double s, int n, int k,
   config.preprocess.deskew = false;
   const int scans = static_cast<int>(seconds * kRate);
   const std::string tile_dir = dir + "/tiles";
-  // From 40 m inside the west edge of the base map (the first copy), at mid-height, heading 30 degrees.
-  double x0 = 0, y0 = 0, x1 = 0, y1 = 0;
-  std::ifstream(dir + "/extent.txt") >> x0 >> y0 >> x1 >> y1;
-  const Eigen::Vector3d start(x0 + 40.0, 0.5 * (y0 + y1), 1.8);
-  const double yaw = M_PI / 6;
-  auto truthAt = [&](double t) {
-    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-    pose.translation() = start + kSpeed * t * Eigen::Vector3d(std::cos(yaw), std::sin(yaw), 0.0);
-    pose.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-    return pose;
-  };
-  // Scans: the base map's points around the drive (the same at every map size), read from the tiles once before
-  // the clock starts and dropped after.
-  std::vector<gpl::PointCloud> scan_clouds(scans);
-  {
-    TileSet corridor;
-    for (int c = 0; c < scans; ++c) {
-      const Eigen::Vector3d at = truthAt(c / kRate).translation();
-      const TileSet w = window(tile_dir, corridor, at.x(), at.y(), 0.0, s, static_cast<int>(std::ceil(kRange / s)), 0);
-      corridor.insert(w.begin(), w.end());
-    }
-    gpl::PointCloud near;
-    for (const auto& key : corridor) {
-      for (const gpl::Point& p : gpl::readPcdXyz(tile_dir + "/" + stem(key, s) + ".pcd"))
-        if (p.x() >= x0 && p.x() <= x1 && p.y() >= y0 && p.y() <= y1) near.push_back(p);
-    }
-    std::mt19937 rng(7);
-    std::normal_distribution<float> noise(0.0f, 0.01f);
-    for (int c = 0; c < scans; ++c) {
-      const Eigen::Isometry3f inv = truthAt(c / kRate).inverse().cast<float>();
-      for (std::size_t p = c % 3; p < near.size(); p += 3) {
-        const gpl::Point q = inv * near[p];
-        if (q.norm() < kRange) scan_clouds[c].push_back(q + gpl::Point(noise(rng), noise(rng), noise(rng)));
-      }
-    }
-  }
+  Extent base{};
+  std::ifstream(dir + "/extent.txt") >> base.x0 >> base.y0 >> base.x1 >> base.y1;
+  const auto truthAt = [&](double t) { return drivePose(base, t); };
+  std::ifstream scan_file(dir + "/scans.bin", std::ios::binary);
 
   const double rss_before = procStatusMb("VmRSS");
   gpl::Localizer loc(config);
@@ -226,14 +243,14 @@ int run(const std::string& dir, const std::string& mode, double s, int n, int k,
   for (int c = 0; c < scans; ++c) {
     const double t = c / kRate;
     if (tiles) follow(truthAt(t).translation(), false);
+    const gpl::PointCloud scan = readScan(scan_file);
     const double cpu0 = cpuSeconds(CLOCK_THREAD_CPUTIME_ID);
-    const gpl::LocalizerOutput out = loc.processScan(t, scan_clouds[c], Eigen::Isometry3d::Identity());
+    const gpl::LocalizerOutput out = loc.processScan(t, scan, Eigen::Isometry3d::Identity());
     scan_cpu += cpuSeconds(CLOCK_THREAD_CPUTIME_ID) - cpu0;
     if (out.state == gpl::LocalizerState::kTracking && out.match_accepted) {
       ++tracked;
       worst_error = std::max(worst_error, (out.pose.translation() - truthAt(t).translation()).norm());
     }
-    scan_clouds[c] = gpl::PointCloud();  // a scan is dropped once used, as a driver's message would be
     std::this_thread::sleep_for(std::chrono::milliseconds(10));  // leave the worker its slot, as between scans
   }
   loc.map().waitIdle();
@@ -294,12 +311,13 @@ int load(const std::string& dir, double s, int repeats) {
 int main(int argc, char** argv) {
   try {
     const std::string cmd = argc > 1 ? argv[1] : "";
-    if (cmd == "prepare" && argc == 6) return prepare(argv[2], std::atoi(argv[3]), argv[4], std::atof(argv[5]));
+    if (cmd == "prepare" && argc == 7)
+      return prepare(argv[2], std::atoi(argv[3]), argv[4], std::atof(argv[5]), std::atof(argv[6]));
     if (cmd == "run" && argc == 8)
       return run(argv[2], argv[3], std::atof(argv[4]), std::atoi(argv[5]), std::atoi(argv[6]), std::atof(argv[7]));
     if (cmd == "load" && argc == 5) return load(argv[2], std::atof(argv[3]), std::atoi(argv[4]));
     std::fprintf(stderr,
-                 "usage: bench_scaling prepare BASE.pcd FACTOR DIR TILE_SIZE\n"
+                 "usage: bench_scaling prepare BASE.pcd FACTOR DIR TILE_SIZE SECONDS\n"
                  "       bench_scaling run DIR global|tiles TILE_SIZE N K SECONDS\n"
                  "       bench_scaling load DIR TILE_SIZE REPEATS\n");
     return 2;

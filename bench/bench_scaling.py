@@ -67,7 +67,7 @@ def main() -> int:
     scale, spacing, seconds, n, k, s = 1.0, args.spacing, args.seconds, args.n, args.k, args.grid_size
     dense_spacing = args.dense_spacing
     if args.quick:
-        scale, spacing, seconds, n, k, s, dense_spacing = 0.2, 0.35, 2.0, 4, 2, 4.0, 0.2
+        scale, spacing, seconds, n, k, s, dense_spacing = 0.2, 0.35, 2.0, 8, 4, 4.0, 0.2
     hardware = {"cpu_model": cpu_model(), "cores": os.cpu_count(), "load_average_1min": os.getloadavg()[0]}
     world = make_world("urban", seed=1, scale=scale)
     x0, y0, x1, y1 = world.extent
@@ -90,7 +90,7 @@ def main() -> int:
         peaks: dict[tuple[int, str], float] = {}
         for factor in FACTORS:
             data = Path(tmp) / f"x{factor}"
-            prepare = [str(args.exe), "prepare", str(base), str(factor), str(data), str(s)]
+            prepare = [str(args.exe), "prepare", str(base), str(factor), str(data), str(s), str(seconds)]
             subprocess.run(prepare, check=True)
             for mode in ("global", "tiles"):
                 cmd = [str(args.exe), "run", str(data), mode, str(s), str(n), str(k), str(seconds)]
@@ -103,7 +103,7 @@ def main() -> int:
                 print(json.dumps(line), flush=True)
             subprocess.run(["rm", "-rf", str(data)], check=True)
         data = Path(tmp) / "dense"
-        subprocess.run([str(args.exe), "prepare", str(dense_pcd), "1", str(data), str(s)], check=True)
+        subprocess.run([str(args.exe), "prepare", str(dense_pcd), "1", str(data), str(s), "0"], check=True)
         cmd = [str(args.exe), "load", str(data), str(s), "3"]
         result = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout)
         print(json.dumps({"bench": "scaling_load", **result, "spacing_m": dense_spacing, **hardware}), flush=True)
