@@ -11,7 +11,7 @@ paper's urban window n = 25, k = 20. Each map is driven twice: with a localizer-
 files for it). The node's peak RSS is the kernel's high-water mark (VmHWM of /proc/<pid>/status) of the
 node process; per-update latency is the node's own ``~status.update_ms`` (window, tile sets, delta built
 and published). A bare rospy node (init_node and spin) is measured for reference: the node's floor.
-Temp dirs are deleted. ``--quick``: a smoke run on a small sparse map (a few seconds after roscore).
+Temp dirs are deleted. ``--quick``: a smoke run on a small sparse map (two 3 s drives after roscore).
 """
 
 from __future__ import annotations
@@ -64,11 +64,12 @@ def parse_args() -> argparse.Namespace:
     p.add_argument("--repeats", type=int, default=3, help="fresh node processes timed for the initial window")
     p.add_argument("--scenarios", default="sparse,paper_scale", help="comma-separated subset of sparse,paper_scale")
     p.add_argument("--no-map-cloud-subscriber", action="store_true", help="skip the drives with a map_cloud subscriber")
-    p.add_argument("--quick", action="store_true", help="smoke run: 60 m x 60 m sparse map, n 5, k 3, one repeat")
+    p.add_argument("--quick", action="store_true", help="smoke run: 30 m x 30 m sparse map at 20 m/s, n 5, k 3")
     args = p.parse_args()
     if args.quick:
-        args.width = args.height = 60.0
+        args.width = args.height = 30.0
         args.points_per_tile, args.n, args.k, args.repeats, args.scenarios = 16, 5, 3, 1, "sparse"
+        args.speed = 20.0
     return args
 
 
