@@ -58,8 +58,11 @@ struct VoxelGaussian {
 /// shared_ptr for as long as you read from it.
 class VoxelMap {
  public:
-  /// Number of hash shards; fixed so a shard index never changes under incremental updates.
+  /// Number of shards; fixed so a shard index never changes under incremental updates.
   static constexpr int kShardBits = 10;
+  /// Voxels of one block of 2^kBlockBits voxels a side share a shard (blocks are hashed to shards): a change of a
+  /// small area (tiles entering or leaving a window) copies the few shards of its blocks, not every shard.
+  static constexpr int kBlockBits = 3;
   static constexpr std::size_t kShards = std::size_t{1} << kShardBits;
 
   /// One shard: an open-addressing table of keys plus dense per-voxel arrays.
@@ -93,7 +96,7 @@ class VoxelMap {
   /// The Gaussian of voxel `key` if it exists and is valid, else nullptr. The pointer lives as long as this map.
   const VoxelGaussian* find(const VoxelKey& key) const {
     const std::uint64_t h = hash(key);
-    const ShardView& v = views_[shardOf(h)];
+    const ShardView& v = views_[shardOf(key)];
     for (std::size_t s = h & v.mask;; s = (s + 1) & v.mask) {
       const Shard::Slot& slot = v.slots[s];
       if (slot.index < 0) return nullptr;
@@ -127,7 +130,14 @@ class VoxelMap {
     h *= 0x94D049BB133111EBULL;
     return h ^ (h >> 31);
   }
-  static std::size_t shardOf(std::uint64_t hash) { return static_cast<std::size_t>(hash >> (64 - kShardBits)); }
+  /// The shard of voxel `key`: a multiplicative hash of its block (arithmetic shifts floor negative indices).
+  static std::size_t shardOf(const VoxelKey& k) {
+    const std::uint64_t h =
+        (static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.x >> kBlockBits)) * 0x9E3779B97F4A7C15ULL) ^
+        (static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.y >> kBlockBits)) * 0xC2B2AE3D27D4EB4FULL) ^
+        (static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.z >> kBlockBits)) * 0x165667B19E3779F9ULL);
+    return static_cast<std::size_t>((h ^ (h >> 29)) * 0xBF58476D1CE4E5B9ULL >> (64 - kShardBits));
+  }
 
  private:
   friend class NdtTarget;

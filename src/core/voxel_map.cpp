@@ -93,7 +93,7 @@ VoxelKey VoxelMap::keyOf(const Eigen::Vector3f& p) const {
 
 const VoxelStats* VoxelMap::stats(const VoxelKey& key) const {
   const std::uint64_t h = hash(key);
-  const Shard* s = shards_[shardOf(h)].get();
+  const Shard* s = shards_[shardOf(key)].get();
   if (!s) return nullptr;
   const std::int32_t i = s->indexOf(key, h);
   return i >= 0 ? &s->stats[i] : nullptr;
@@ -159,7 +159,7 @@ std::vector<std::pair<VoxelKey, VoxelStats>> voxelStatistics(const PointCloud& p
       if (!finite[i]) continue;
       keys[i] = {static_cast<std::int32_t>(std::floor(p.x() * inv)), static_cast<std::int32_t>(std::floor(p.y() * inv)),
                  static_cast<std::int32_t>(std::floor(p.z() * inv))};
-      shard[i] = static_cast<std::uint32_t>(VoxelMap::shardOf(VoxelMap::hash(keys[i])));
+      shard[i] = static_cast<std::uint32_t>(VoxelMap::shardOf(keys[i]));
       ++hist[t][shard[i] + 1];
     }
   }
@@ -375,9 +375,9 @@ void NdtTarget::apply(const Delta& delta, bool subtract, std::shared_ptr<const V
   // delta is grouped by shard (voxelStatistics sorts it so): find each shard's range.
   std::vector<std::pair<std::size_t, std::size_t>> ranges;  // [begin, end) per touched shard
   for (std::size_t b = 0; b < delta.size();) {
-    const std::size_t s = VoxelMap::shardOf(VoxelMap::hash(delta[b].first));
+    const std::size_t s = VoxelMap::shardOf(delta[b].first);
     std::size_t e = b + 1;
-    while (e < delta.size() && VoxelMap::shardOf(VoxelMap::hash(delta[e].first)) == s) ++e;
+    while (e < delta.size() && VoxelMap::shardOf(delta[e].first) == s) ++e;
     ranges.emplace_back(b, e);
     b = e;
   }
@@ -386,7 +386,7 @@ void NdtTarget::apply(const Delta& delta, bool subtract, std::shared_ptr<const V
   bool missing = false;
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 4) reduction(|| : missing)
   for (std::size_t r = 0; r < ranges.size(); ++r) {
-    const std::size_t s = VoxelMap::shardOf(VoxelMap::hash(delta[ranges[r].first].first));
+    const std::size_t s = VoxelMap::shardOf(delta[ranges[r].first].first);
     const VoxelMap::Shard* old = base->shards_[s].get();
     auto shard = old ? std::make_shared<VoxelMap::Shard>(*old) : std::make_shared<VoxelMap::Shard>();
     const std::int64_t vox_before = static_cast<std::int64_t>(shard->keys.size());
