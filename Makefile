@@ -75,6 +75,14 @@ tsan-localizer: setup
 	cmake --build $(ROOT)/build/build_tsan_localizer -j2
 	cd $(ROOT) && TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1" $(ROOT)/build/build_tsan_localizer/tsan_localizer_tests
 
+# ---------------------------------------------------------------- memory against map size
+.PHONY: bench-scaling
+# Build output goes to build/bench_scaling_build.log so stdout holds only the JSON lines.
+bench-scaling: setup
+	@log=$(ROOT)/build/bench_scaling_build.log; mkdir -p $(ROOT)/build; \
+	  bash $(ROOT)/tools/build.sh >$$log 2>&1 || { tail -40 $$log; exit 1; }
+	@$(SETUP) python3 $(ROOT)/bench/bench_scaling.py $(ARGS)
+
 # ---------------------------------------------------------------- scenario simulator
 .PHONY: bench-sim
 # Build output goes to build/bench_sim_build.log so stdout holds only the JSON.

@@ -108,7 +108,12 @@ Scan readScan(std::ifstream& in) {
 
 using TileKey = std::pair<int, int>;
 
-std::string tileId(const TileKey& k) { return std::to_string(k.first) + "_" + std::to_string(k.second); }
+// The tile's file stem as the tiler names it: its centre [m] ("cx_cy"), from which the map worker gets (i, j).
+std::string tileId(const TileKey& k, double s) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.6g_%.6g", (k.first + 0.5) * s, (k.second + 0.5) * s);
+  return buf;
+}
 
 std::map<TileKey, gpl::PointCloud> cutTiles(const gpl::PointCloud& map, double s) {
   std::map<TileKey, gpl::PointCloud> tiles;
@@ -256,10 +261,10 @@ int main(int argc, char** argv) {
       std::vector<gpl::TileCloud> added;
       std::vector<std::string> removed;
       for (const TileKey& k : want)
-        if (!loaded.count(k)) added.push_back({tileId(k), tiles.at(k)});
+        if (!loaded.count(k)) added.push_back({tileId(k, tile_size), tiles.at(k)});
       for (const TileKey& k : loaded)
-        if (!want.count(k)) removed.push_back(tileId(k));
-      loc.map().submit(gpl::MapChange::tiles(loaded.empty(), std::move(added), std::move(removed)));
+        if (!want.count(k)) removed.push_back(tileId(k, tile_size));
+      loc.map().submit(gpl::MapChange::tiles(loaded.empty(), tile_size, std::move(added), std::move(removed)));
     }
     loaded = want;
     ++updates;

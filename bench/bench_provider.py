@@ -6,10 +6,12 @@ default parameters (only tiles/dir, n and k set) under a private roscore, is dri
 Two maps: the issue's sparse one (500 m x 700 m, s = 2 m, 64 points per tile) and a paper-scale one
 (1,600 points per tile, the density of the paper's and the demo's maps, about 27 KB per tile) with the
 paper's urban window n = 25, k = 20. Each map is driven twice: with a localizer-like subscriber on
-``tile_delta`` only (the experiment's setting), and with an rviz-like subscriber on ``map_cloud`` too.
-The node's peak RSS is the kernel's high-water mark (VmHWM of /proc/<pid>/status) of the node
-process; per-update latency is the node's own ``~status.update_ms`` (window, store, messages built and
-published). A bare rospy node (init_node and spin) is measured for reference. Temp dirs are deleted.
+``tile_delta`` only (the experiment's setting: tiles by reference, the node reads no tile), and with
+``publish_map_cloud`` on and an rviz-like subscriber on ``map_cloud`` (the node then reads the window's
+files for it). The node's peak RSS is the kernel's high-water mark (VmHWM of /proc/<pid>/status) of the
+node process; per-update latency is the node's own ``~status.update_ms`` (window, tile sets, delta built
+and published). A bare rospy node (init_node and spin) is measured for reference: the node's floor.
+Temp dirs are deleted. ``--quick``: a smoke run on a small sparse map (two 3 s drives after roscore).
 """
 
 from __future__ import annotations
@@ -59,11 +61,16 @@ def parse_args() -> argparse.Namespace:
     p.add_argument("--k", type=int, default=20)
     p.add_argument("--speed", type=float, default=10.0, help="[m/s]")
     p.add_argument("--pose-rate", type=float, default=25.0, help="odometry rate [Hz]")
-    p.add_argument("--cache-mb", type=float, default=None, help="[MiB] tiles/cache_mb; default: the node's default")
     p.add_argument("--repeats", type=int, default=3, help="fresh node processes timed for the initial window")
     p.add_argument("--scenarios", default="sparse,paper_scale", help="comma-separated subset of sparse,paper_scale")
     p.add_argument("--no-map-cloud-subscriber", action="store_true", help="skip the drives with a map_cloud subscriber")
-    return p.parse_args()
+    p.add_argument("--quick", action="store_true", help="smoke run: 30 m x 30 m sparse map at 20 m/s, n 5, k 3")
+    args = p.parse_args()
+    if args.quick:
+        args.width = args.height = 30.0
+        args.points_per_tile, args.n, args.k, args.repeats, args.scenarios = 16, 5, 3, 1, "sparse"
+        args.speed = 20.0
+    return args
 
 
 def route_poses(width: float, height: float, speed: float, rate: float) -> np.ndarray:
@@ -83,21 +90,24 @@ def route_poses(width: float, height: float, speed: float, rate: float) -> np.nd
 def make_map(directory: Path, width: float, height: float, s: float, points_per_tile: int) -> dict:
     from fixtures.synthetic_tiles import POINT_DTYPE, write_tiles
 
-    from grid_puzzle_localization.tiles.grid import tile_filename, tile_stem
-    from grid_puzzle_localization.tiling.index import TileEntry, TileIndex, write_index
+    from grid_puzzle_localization.tiles.grid import tile_filename
+    from grid_puzzle_localization.tiling.index import TileIndex, TileTable, write_index
 
     ni, nj = math.ceil(width / s), math.ceil(height / s)
     keys = [(i, j) for i in range(ni) for j in range(nj)]
     write_tiles(directory, keys, s, points_per_tile, seed=1)
     size = POINT_DTYPE.itemsize * points_per_tile
-    entries = [
-        TileEntry((i, j), tile_stem(i, j, s), tile_filename(i, j, s), ((i + 0.5) * s, (j + 0.5) * s),
-                  points_per_tile, {"min": [i * s, j * s, -1.0], "max": [(i + 1) * s, (j + 1) * s, 5.0]},
-                  size + 200, size)
-        for i, j in keys
-    ]  # fmt: skip
+    table = TileTable(
+        i=[i for i, _ in keys],
+        j=[j for _, j in keys],
+        files=[tile_filename(i, j, s) for i, j in keys],
+        points=[points_per_tile] * len(keys),
+        bytes=[size + 200] * len(keys),
+        lower=[[i * s for i, _ in keys], [j * s for _, j in keys], [-1.0] * len(keys)],
+        upper=[[(i + 1) * s for i, _ in keys], [(j + 1) * s for _, j in keys], [5.0] * len(keys)],
+    )
     fields = [{"name": n, "size": 4, "type": "F", "count": 1} for n in POINT_DTYPE.names]
-    write_index(directory, TileIndex(s, fields, POINT_DTYPE.itemsize, len(keys) * points_per_tile, 0, [], entries))
+    write_index(directory, TileIndex(s, fields, POINT_DTYPE.itemsize, len(keys) * points_per_tile, 0, [], table))
     disk = sum(f.stat().st_size for f in directory.iterdir())
     return {"width_m": width, "height_m": height, "grid_size_m": s, "points_per_tile": points_per_tile,
             "fields": list(POINT_DTYPE.names), "tiles": len(keys), "disk_mb": round(disk / 2**20, 1)}  # fmt: skip
@@ -132,6 +142,7 @@ class DriveRecord:
     status: list = field(default_factory=list)
     added: list[int] = field(default_factory=list)
     removed: list[int] = field(default_factory=list)
+    prefetch: list[int] = field(default_factory=list)
     revisions: list[int] = field(default_factory=list)
     map_clouds: int = 0
     map_cloud_mb: float = 0.0
@@ -144,8 +155,8 @@ class NodeRun:
     def __init__(self, core, log_dir: Path, tiles: Path, args: argparse.Namespace, map_cloud_subscriber: bool):
         self.record = DriveRecord()
         params = {"tiles/dir": str(tiles), "window/n": args.n, "window/k": args.k}
-        if args.cache_mb is not None:
-            params["tiles/cache_mb"] = args.cache_mb
+        if map_cloud_subscriber:
+            params["publish_map_cloud"] = True
         if rospy.has_param(NODE):
             rospy.delete_param(NODE)
         for name, value in params.items():
@@ -174,6 +185,7 @@ class NodeRun:
         with self.record.lock:
             self.record.added.append(len(msg.added_ids))
             self.record.removed.append(len(msg.removed_ids))
+            self.record.prefetch.append(len(msg.prefetch_ids))
             self.record.revisions.append(msg.revision)
 
     def _on_status(self, msg) -> None:
@@ -204,7 +216,9 @@ class NodeRun:
         self.process.stop()
 
 
-def drive(core, log_dir: Path, tiles: Path, args: argparse.Namespace, width: float, height: float, rviz: bool) -> dict:
+def drive(
+    core, log_dir: Path, tiles: Path, args: argparse.Namespace, width: float, height: float, rviz: bool, floor: float
+) -> dict:
     """Starts a node, drives the route in real time and returns the figures of that run."""
     poses = route_poses(width, height, args.speed, args.pose_rate)
     run = NodeRun(core, log_dir, tiles, args, rviz)
@@ -224,12 +238,8 @@ def drive(core, log_dir: Path, tiles: Path, args: argparse.Namespace, width: flo
         run.close()
     rec = run.record
     status = rec.status
-    window_bytes = max(m.bytes for m in status)
-    last = status[-1]
     first = status[0]
-    initial_hits = first.cache_hits + first.cache_misses
-    later = last.cache_hits + last.cache_misses - initial_hits
-    target = 2 * window_bytes / 2**20 + 60.0
+    target = floor + 10.0
     update_ms = [m.update_ms for m in status[1:]]
     return {
         "subscribers": "tile_delta, map_cloud (rviz-like)" if rviz else "tile_delta (localizer-like)",
@@ -239,20 +249,15 @@ def drive(core, log_dir: Path, tiles: Path, args: argparse.Namespace, width: flo
         "updates": len(update_ms),
         "initial_window": {"update_ms": round(first.update_ms, 1), "tiles": first.tiles_loaded},
         "update_ms": percentiles(update_ms),
-        "load_ms": percentiles([m.load_ms for m in status[1:]]),
+        "tiles_in_window_max": max(m.tiles_loaded for m in status),
         "tiles_added_per_update": percentiles(rec.added[1:]),
         "tiles_removed_per_update": percentiles(rec.removed[1:]),
+        "tiles_prefetch_per_update": percentiles(rec.prefetch[1:]),
         "deltas_received": len(rec.revisions),
         "delta_revisions_contiguous": rec.revisions == list(range(1, len(rec.revisions) + 1)),
         "map_clouds_received": rec.map_clouds,
         "map_cloud_mb_max": round(rec.map_cloud_mb, 2),
-        "cache": {
-            "hits": last.cache_hits,
-            "misses": last.cache_misses,
-            "hit_rate_after_initial_window": round(last.cache_hits / max(1, later), 4),
-        },
         "memory_mib": {
-            "loaded_window_max": round(window_bytes / 2**20, 2),
             "rss_at_start": round(rss_start, 1),
             "peak_rss": round(peak, 1),
             "rss_at_end": round(rss_end, 1),
@@ -261,7 +266,7 @@ def drive(core, log_dir: Path, tiles: Path, args: argparse.Namespace, width: flo
         },
         "targets_met": {
             "update_p95_le_50ms": bool(np.percentile(update_ms, 95) <= 50.0),
-            "rss_le_2x_window_plus_60mb": bool(peak <= target),
+            "rss_le_bare_rospy_plus_10mb": bool(peak <= target),
         },
     }
 
@@ -291,17 +296,21 @@ def bare_rospy_rss(core, log_dir: Path) -> dict:
         proc.stop()
 
 
-def scenario(core, log_dir: Path, args: argparse.Namespace, width: float, height: float, points: int) -> dict:
+def scenario(
+    core, log_dir: Path, args: argparse.Namespace, width: float, height: float, points: int, floor: float
+) -> dict:
     tiles = Path(tempfile.mkdtemp(prefix="gpm_bench_provider_"))
     try:
         made = make_map(tiles, width, height, args.grid_size, points)
-        plain = drive(core, log_dir, tiles, args, width, height, rviz=False)
+        plain = drive(core, log_dir, tiles, args, width, height, rviz=False, floor=floor)
         loads = [plain["initial_window"]["update_ms"], *initial_loads(core, log_dir, tiles, args, width, height)]
         plain["initial_window"]["update_ms_median"] = round(float(np.median(loads)), 1)
         plain["initial_window"]["update_ms_all"] = loads
         out = {"map": made, "drive": plain}
         if not args.no_map_cloud_subscriber:
-            out["drive_with_map_cloud_subscriber"] = drive(core, log_dir, tiles, args, width, height, rviz=True)
+            out["drive_with_map_cloud_subscriber"] = drive(
+                core, log_dir, tiles, args, width, height, rviz=True, floor=floor
+            )
     finally:
         shutil.rmtree(tiles, ignore_errors=True)
     return out
@@ -311,7 +320,7 @@ def hardware() -> dict:
     return {
         "cpu_model": cpu_model(),
         "cores": os.cpu_count(),
-        "node_threads": "worker, prefetcher, map_cloud publisher (+ rospy's)",
+        "node_threads": "worker, map_cloud publisher when on (+ rospy's)",
         "python": platform.python_version(),
         "load_average_1_5_15_at_end": [round(v, 2) for v in os.getloadavg()],
     }
@@ -325,10 +334,11 @@ def main() -> int:
         with RosCore(log_dir) as core:
             os.environ.update(core.env)
             rospy.init_node("bench_provider_driver", disable_signals=True)
+            bare = bare_rospy_rss(core, log_dir)
             result = {
                 "benchmark": "grid_puzzle_map_provider",
                 "window": {"n": args.n, "k": args.k, "speed_mps": args.speed, "pose_rate_hz": args.pose_rate},
-                "bare_rospy_node_mib": bare_rospy_rss(core, log_dir),
+                "bare_rospy_node_mib": bare,
             }
             maps = {
                 "sparse": (args.width, args.height, args.points_per_tile),
@@ -337,7 +347,7 @@ def main() -> int:
             for name in args.scenarios.split(","):
                 if name not in maps:
                     raise SystemExit(f"--scenarios: unknown scenario '{name}'; use sparse and/or paper_scale")
-                result[name] = scenario(core, log_dir, args, *maps[name])
+                result[name] = scenario(core, log_dir, args, *maps[name], floor=bare["rss"])
             rospy.signal_shutdown("benchmark done")
     except Exception:
         print(f"benchmark failed; logs kept in {log_dir}", file=sys.stderr)
@@ -345,11 +355,12 @@ def main() -> int:
     shutil.rmtree(log_dir, ignore_errors=True)
     result["hardware"] = {**hardware(), "load_average_1_at_start": load_before[0]}
     result["notes"] = (
-        "MiB throughout; tile files were just written, so reads hit the OS page cache; update_ms is the node's"
-        " ~status.update_ms (window, store, tile_delta built and published; map_cloud has a thread of its own);"
-        " peak_rss is the node process's VmHWM; target_rss = 2 x loaded_window_max + 60"
+        "MiB throughout; tiles travel by reference (the node reads no tile unless map_cloud is on and"
+        " subscribed); update_ms is the node's ~status.update_ms (window, tile sets, tile_delta built and"
+        " published; map_cloud has a thread of its own); peak_rss is the node process's VmHWM;"
+        " target_rss = the bare rospy node's RSS + 10"
     )
-    print(json.dumps(result, indent=1))
+    print(json.dumps(result))
     return 0
 
 

@@ -18,7 +18,6 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 FAULT_TESTS = (
     "test/python/test_fault_disk.py",
-    "test/python/test_fault_tiles.py",
     "test/python/test_fuzz_regressions.py",
 )
 

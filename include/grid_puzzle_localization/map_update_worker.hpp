@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "grid_puzzle_localization/point_cloud.hpp"
+#include "grid_puzzle_localization/tile_cache.hpp"
 #include "grid_puzzle_localization/voxel_map.hpp"
 
 namespace grid_puzzle_localization {
@@ -24,20 +25,39 @@ struct TileCloud {
   PointCloud points;
 };
 
-/// A change of the map, as the three map sources produce it.
+/// Tiles by reference: which tile files of a directory enter and leave the window. The worker reads them.
+struct TileFileChange {
+  std::string dir;                    ///< tile directory: tile `id` is the file dir/id.pcd
+  std::string index_revision;         ///< identity of the directory's index; another value means other tiles
+  bool reset = false;                 ///< drop every loaded tile (and the cache) before applying this change
+  std::vector<std::string> added;     ///< tiles entering; an id already loaded is read again
+  std::vector<std::string> removed;   ///< tiles leaving; unknown ids are ignored
+  std::vector<std::string> prefetch;  ///< tiles likely to enter next: read into the cache while idle
+};
+
+/// A change of the map, as the map sources produce it. Tiles are named by their file stem "cx_cy" (tile
+/// centre in metres); with `grid_size` [m] a whole multiple of the NDT resolution the target is tile-aligned
+/// (a leaving tile drops its voxels, nothing is kept per tile), otherwise each tile's statistics are kept so
+/// that its removal subtracts them (more memory per voxel; MapUpdateStats::tile_aligned says which).
 struct MapChange {
-  enum class Kind { kFullCloud, kTiles, kPcdFile };
+  enum class Kind { kFullCloud, kTiles, kTileFiles, kPcdFile };
   Kind kind = Kind::kFullCloud;
   PointCloud cloud;                  ///< kFullCloud: the whole map (map frame, m); replaces the target
   bool reset = false;                ///< kTiles: drop every loaded tile before applying this change
+  double grid_size = 0.0;            ///< kTiles, kTileFiles: tile side s [m]
   std::vector<TileCloud> added;      ///< kTiles: tiles entering; an id already loaded is replaced
   std::vector<std::string> removed;  ///< kTiles: tiles leaving; unknown ids are ignored
+  TileFileChange files;              ///< kTileFiles
   std::string pcd_path;              ///< kPcdFile: a PCD file read by the worker; replaces the target
 
   static MapChange fullCloud(PointCloud cloud);
-  static MapChange tiles(bool reset, std::vector<TileCloud> added, std::vector<std::string> removed);
+  static MapChange tiles(bool reset, double grid_size, std::vector<TileCloud> added, std::vector<std::string> removed);
+  static MapChange tileFiles(double grid_size, TileFileChange files);
   static MapChange pcdFile(std::string path);
 };
+
+/// Tile (i, j) of side `grid_size` named by the stem "cx_cy"; throws std::invalid_argument naming the stem.
+TileKey tileKeyOfStem(const std::string& stem, double grid_size);
 
 /// What the last finished update did.
 struct MapUpdateStats {
@@ -47,6 +67,15 @@ struct MapUpdateStats {
   std::size_t tiles = 0;         ///< tiles loaded (tiles mode)
   std::size_t voxels = 0;        ///< voxels with a valid Gaussian in the last snapshot
   std::size_t points = 0;        ///< points summed into the last snapshot
+  bool tile_aligned = false;     ///< tiles mode: voxels are tile-aligned (see MapChange)
+  // Tiles by reference, totals since start:
+  std::size_t tiles_read = 0;        ///< tile files read (window and prefetch)
+  std::size_t tile_points_read = 0;  ///< points in them
+  double tile_read_ms = 0.0;         ///< wall time reading them [ms]
+  double tile_fold_ms = 0.0;         ///< wall time folding window tiles into the target [ms]
+  std::size_t cache_hits = 0;        ///< entering tiles served by the prefetch cache
+  std::size_t cache_bytes = 0;       ///< bytes held by the prefetch cache now
+  std::size_t points_outside = 0;    ///< tile-aligned: points not added because their voxel is in another tile
 };
 
 class MapUpdateWorker {
@@ -54,6 +83,9 @@ class MapUpdateWorker {
   /// Starts the worker thread. `params` must validate (throws std::invalid_argument otherwise); its
   /// `threads` is the OpenMP team of the updates, so a small value leaves cores to the scan thread.
   explicit MapUpdateWorker(const VoxelMapParams& params);
+  static constexpr double kDefaultTileCacheMb = 16.0;
+  /// Byte budget of the prefetch cache of tiles mode by reference [MiB] (>= 0; 0 = no prefetch). Thread-safe.
+  void setTileCacheMb(double megabytes);
   /// Stops the worker after the change in progress; queued changes are dropped.
   ~MapUpdateWorker();
   MapUpdateWorker(const MapUpdateWorker&) = delete;
@@ -82,7 +114,18 @@ class MapUpdateWorker {
 
  private:
   void run();
-  void apply(NdtTarget& target, const MapChange& change);
+  // Applies one change; problems that leave the rest of the change usable (a bad tile) go to `failures`.
+  void apply(NdtTarget& target, const MapChange& change, std::vector<std::string>& failures);
+  void applyTileFiles(NdtTarget& target, double grid_size, const TileFileChange& change,
+                      std::vector<std::string>& failures);
+  // Tiles mode bookkeeping shared by both tile sources.
+  void startTiles(NdtTarget& target, bool reset, double grid_size);
+  void removeTiles(NdtTarget& target, const std::vector<std::string>& ids);
+  // Adds tiles (id, points) as one target update when tile-aligned; a bad id goes to `failures`.
+  void addTiles(NdtTarget& target, const std::vector<std::pair<std::string, const PointCloud*>>& batch,
+                std::vector<std::string>& failures);
+  PointCloud readTile(const std::string& path);  // counts into stats_
+  void readAhead();                              // prefetch while nothing is queued
 
   mutable std::mutex mutex_;  // guards everything below up to worker_
   std::condition_variable wake_;
@@ -97,8 +140,20 @@ class MapUpdateWorker {
   std::shared_ptr<const VoxelMap> ready_;  // accessed only with std::atomic_load/exchange/store
   // Owned by the worker thread only.
   VoxelMapParams params_;
-  std::unordered_map<std::string, TargetId> tile_ids_;
+  struct LoadedTile {
+    TileKey key;
+    TargetId id = 0;  // in the target when the voxels are not tile-aligned
+  };
+  std::unordered_map<std::string, LoadedTile> tiles_;
+  double tile_size_ = 0.0;  // side of the loaded tiles [m]
+  bool aligned_ = false;    // tile-aligned voxels for tile_size_
   TargetId next_id_ = 0;
+  std::string tile_dir_, index_revision_;  // source of the loaded tiles (by reference)
+  std::vector<std::string> prefetch_;      // ids still to read ahead
+  TileCache cache_;                        // worker thread only; its budget comes from cache_budget_
+  std::size_t cache_budget_;               // guarded by mutex_ (setTileCacheMb)
+  bool prefetching_ = false;               // guarded by mutex_
+  MapUpdateStats totals_;                  // worker thread only: the by-reference totals of stats_
   std::thread worker_;
 };
 

@@ -58,8 +58,11 @@ struct VoxelGaussian {
 /// shared_ptr for as long as you read from it.
 class VoxelMap {
  public:
-  /// Number of hash shards; fixed so a shard index never changes under incremental updates.
+  /// Number of shards; fixed so a shard index never changes under incremental updates.
   static constexpr int kShardBits = 10;
+  /// Voxels of one block of 2^kBlockBits voxels a side share a shard (blocks are hashed to shards): a change of a
+  /// small area (tiles entering or leaving a window) copies the few shards of its blocks, not every shard.
+  static constexpr int kBlockBits = 3;
   static constexpr std::size_t kShards = std::size_t{1} << kShardBits;
 
   /// One shard: an open-addressing table of keys plus dense per-voxel arrays.
@@ -93,7 +96,7 @@ class VoxelMap {
   /// The Gaussian of voxel `key` if it exists and is valid, else nullptr. The pointer lives as long as this map.
   const VoxelGaussian* find(const VoxelKey& key) const {
     const std::uint64_t h = hash(key);
-    const ShardView& v = views_[shardOf(h)];
+    const ShardView& v = views_[shardOf(key)];
     for (std::size_t s = h & v.mask;; s = (s + 1) & v.mask) {
       const Shard::Slot& slot = v.slots[s];
       if (slot.index < 0) return nullptr;
@@ -127,7 +130,14 @@ class VoxelMap {
     h *= 0x94D049BB133111EBULL;
     return h ^ (h >> 31);
   }
-  static std::size_t shardOf(std::uint64_t hash) { return static_cast<std::size_t>(hash >> (64 - kShardBits)); }
+  /// The shard of voxel `key`: a multiplicative hash of its block (arithmetic shifts floor negative indices).
+  static std::size_t shardOf(const VoxelKey& k) {
+    const std::uint64_t h =
+        (static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.x >> kBlockBits)) * 0x9E3779B97F4A7C15ULL) ^
+        (static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.y >> kBlockBits)) * 0xC2B2AE3D27D4EB4FULL) ^
+        (static_cast<std::uint64_t>(static_cast<std::uint32_t>(k.z >> kBlockBits)) * 0x165667B19E3779F9ULL);
+    return static_cast<std::size_t>((h ^ (h >> 29)) * 0xBF58476D1CE4E5B9ULL >> (64 - kShardBits));
+  }
 
  private:
   friend class NdtTarget;
@@ -148,6 +158,16 @@ class VoxelMap {
 
 /// Identifier of a cloud added with NdtTarget::addTarget (for example a tile index).
 using TargetId = std::uint64_t;
+
+/// Index of a square map tile of side s [m]: tile (i, j) covers [i s, (i + 1) s) x [j s, (j + 1) s).
+struct TileKey {
+  std::int64_t i = 0, j = 0;
+  bool operator==(const TileKey& o) const { return i == o.i && j == o.j; }
+};
+
+/// Voxels along a tile side when `tile_size` is a whole multiple of `resolution` (to 1e-9 relative), else 0.
+/// Only then does every voxel lie in exactly one tile (tile-aligned voxels).
+int voxelsPerTileSide(double tile_size, double resolution);
 
 /// Builds and incrementally updates the NDT target, publishing immutable VoxelMap snapshots.
 ///
@@ -171,6 +191,17 @@ class NdtTarget {
   /// Removes the cloud added under `id` exactly (its statistics are subtracted). Returns false if absent.
   bool removeTarget(TargetId id);
   bool hasTarget(TargetId id) const;
+
+  /// Tile-aligned update: adds the points of tile `key` of side `tile_size` [m], which must be a whole
+  /// multiple of the resolution (voxelsPerTileSide > 0; else std::invalid_argument). Every voxel then lies in
+  /// exactly one tile, so nothing is kept per tile: removeTiles drops the tile's voxels. Points whose voxel lies
+  /// outside the tile (a point on the wrong side of a border) are not added; returns their number. The tile
+  /// must not be in the target (remove it first).
+  std::size_t addTile(const TileKey& key, double tile_size, const PointCloud& points);
+  /// addTile of several tiles (distinct keys) as one update: each touched shard is copied once, not once per tile.
+  std::size_t addTiles(const std::vector<std::pair<TileKey, const PointCloud*>>& tiles, double tile_size);
+  /// Drops every voxel of the tiles `keys` (side `tile_size`, as in addTile).
+  void removeTiles(const std::vector<TileKey>& keys, double tile_size);
   std::vector<TargetId> targetIds() const;  ///< ids currently added, ascending
 
   /// The current snapshot (never null; empty before the first set/add). Thread-safe.

@@ -1,6 +1,10 @@
 #include "grid_puzzle_localization/map_update_worker.hpp"
 
+#include <sys/stat.h>
+
 #include <chrono>
+#include <cmath>
+#include <cstdlib>
 #include <stdexcept>
 #if defined(__GLIBC__)
 #include <malloc.h>
@@ -17,13 +21,38 @@ MapChange MapChange::fullCloud(PointCloud cloud) {
   return c;
 }
 
-MapChange MapChange::tiles(bool reset, std::vector<TileCloud> added, std::vector<std::string> removed) {
+MapChange MapChange::tiles(bool reset, double grid_size, std::vector<TileCloud> added,
+                           std::vector<std::string> removed) {
   MapChange c;
   c.kind = Kind::kTiles;
   c.reset = reset;
+  c.grid_size = grid_size;
   c.added = std::move(added);
   c.removed = std::move(removed);
   return c;
+}
+
+MapChange MapChange::tileFiles(double grid_size, TileFileChange files) {
+  MapChange c;
+  c.kind = Kind::kTileFiles;
+  c.grid_size = grid_size;
+  c.files = std::move(files);
+  return c;
+}
+
+TileKey tileKeyOfStem(const std::string& stem, double grid_size) {
+  const std::size_t sep = stem.find('_');
+  const char* begin = stem.c_str();
+  char* end = nullptr;
+  const double cx = std::strtod(begin, &end);
+  const bool x_ok = sep != std::string::npos && end == begin + sep;
+  const double cy = x_ok ? std::strtod(begin + sep + 1, &end) : 0.0;
+  if (!x_ok || end != begin + stem.size() || sep + 1 == stem.size() || !std::isfinite(cx) || !std::isfinite(cy) ||
+      !(grid_size > 0.0))
+    throw std::invalid_argument("tile id '" + stem +
+                                "' is not a tile name <cx>_<cy> (centre in metres, e.g. 1.0_-3.0)");
+  // The centre is mid-tile, so floor is far from a rounding edge.
+  return {static_cast<std::int64_t>(std::floor(cx / grid_size)), static_cast<std::int64_t>(std::floor(cy / grid_size))};
 }
 
 MapChange MapChange::pcdFile(std::string path) {
@@ -33,7 +62,8 @@ MapChange MapChange::pcdFile(std::string path) {
   return c;
 }
 
-MapUpdateWorker::MapUpdateWorker(const VoxelMapParams& params) : params_(params) {
+MapUpdateWorker::MapUpdateWorker(const VoxelMapParams& params)
+    : params_(params), cache_budget_(static_cast<std::size_t>(kDefaultTileCacheMb * 1024 * 1024)) {
   const std::string problem = params.validate();
   if (!problem.empty()) throw std::invalid_argument("MapUpdateWorker: " + problem);
   worker_ = std::thread(&MapUpdateWorker::run, this);
@@ -46,6 +76,13 @@ MapUpdateWorker::~MapUpdateWorker() {
   }
   wake_.notify_all();
   worker_.join();
+}
+
+void MapUpdateWorker::setTileCacheMb(double megabytes) {
+  if (!(megabytes >= 0.0))
+    throw std::invalid_argument("tile cache budget must be >= 0 MiB (got " + std::to_string(megabytes) + ")");
+  std::lock_guard<std::mutex> lock(mutex_);
+  cache_budget_ = static_cast<std::size_t>(megabytes * 1024 * 1024);
 }
 
 void MapUpdateWorker::submit(MapChange change) {
@@ -76,7 +113,7 @@ bool MapUpdateWorker::busy() const {
 
 void MapUpdateWorker::waitIdle() {
   std::unique_lock<std::mutex> lock(mutex_);
-  idle_.wait(lock, [this] { return !working_ && !releasing_ && queue_.empty() && retired_.empty(); });
+  idle_.wait(lock, [this] { return !working_ && !releasing_ && !prefetching_ && queue_.empty() && retired_.empty(); });
 }
 
 MapUpdateStats MapUpdateWorker::stats() const {
@@ -91,37 +128,175 @@ std::vector<std::string> MapUpdateWorker::takeErrors() {
   return out;
 }
 
-void MapUpdateWorker::apply(NdtTarget& target, const MapChange& change) {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+constexpr std::size_t kFoldBatchPoints = 1 << 21;  // ~2 M points, 24 MB of x y z waiting to be folded
+
+bool isDirectory(const std::string& path) {
+  struct stat st;
+  return ::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode);
+}
+
+}  // namespace
+
+void MapUpdateWorker::apply(NdtTarget& target, const MapChange& change, std::vector<std::string>& failures) {
   switch (change.kind) {
     case MapChange::Kind::kFullCloud:
       target.setTarget(change.cloud);
-      tile_ids_.clear();
+      tiles_.clear();
       break;
     case MapChange::Kind::kPcdFile:
       target.setTarget(readPcdXyz(change.pcd_path));
-      tile_ids_.clear();
+      tiles_.clear();
       break;
     case MapChange::Kind::kTiles:
-      if (change.reset) {
-        target.setTarget(PointCloud());
-        tile_ids_.clear();
-      }
-      for (const std::string& id : change.removed) {
-        const auto it = tile_ids_.find(id);
-        if (it == tile_ids_.end()) continue;
-        target.removeTarget(it->second);
-        tile_ids_.erase(it);
-      }
-      for (const TileCloud& tile : change.added) {
-        const auto it = tile_ids_.find(tile.id);
-        if (it != tile_ids_.end()) {
-          target.removeTarget(it->second);
-          tile_ids_.erase(it);
-        }
-        target.addTarget(next_id_, tile.points);
-        tile_ids_.emplace(tile.id, next_id_++);
+      startTiles(target, change.reset, change.grid_size);
+      removeTiles(target, change.removed);
+      {
+        std::vector<std::pair<std::string, const PointCloud*>> batch;
+        for (const TileCloud& tile : change.added) batch.emplace_back(tile.id, &tile.points);
+        addTiles(target, batch, failures);
       }
       break;
+    case MapChange::Kind::kTileFiles:
+      applyTileFiles(target, change.grid_size, change.files, failures);
+      break;
+  }
+}
+
+void MapUpdateWorker::startTiles(NdtTarget& target, bool reset, double grid_size) {
+  if (!reset && !tiles_.empty() && grid_size != tile_size_)
+    throw std::invalid_argument("tile side changed from " + std::to_string(tile_size_) + " m to " +
+                                std::to_string(grid_size) + " m without a reset; change ignored");
+  if (reset) {
+    target.setTarget(PointCloud());
+    tiles_.clear();
+  }
+  if (tiles_.empty()) {
+    tile_size_ = grid_size;
+    aligned_ = voxelsPerTileSide(grid_size, params_.resolution) > 0;
+  }
+}
+
+void MapUpdateWorker::removeTiles(NdtTarget& target, const std::vector<std::string>& ids) {
+  std::vector<TileKey> aligned;
+  for (const std::string& id : ids) {
+    const auto it = tiles_.find(id);
+    if (it == tiles_.end()) continue;
+    if (aligned_)
+      aligned.push_back(it->second.key);
+    else
+      target.removeTarget(it->second.id);
+    tiles_.erase(it);
+  }
+  if (!aligned.empty()) target.removeTiles(aligned, tile_size_);
+}
+
+void MapUpdateWorker::addTiles(NdtTarget& target, const std::vector<std::pair<std::string, const PointCloud*>>& batch,
+                               std::vector<std::string>& failures) {
+  std::vector<std::string> reloaded;
+  for (const auto& tile : batch)
+    if (tiles_.count(tile.first)) reloaded.push_back(tile.first);
+  removeTiles(target, reloaded);
+  std::vector<std::pair<TileKey, const PointCloud*>> aligned;
+  for (const auto& [id, points] : batch) {
+    if (tiles_.count(id)) continue;  // twice in one batch: the first copy counts
+    LoadedTile tile;
+    try {
+      if (aligned_) {
+        tile.key = tileKeyOfStem(id, tile_size_);
+        aligned.emplace_back(tile.key, points);
+      } else {
+        tile.id = next_id_++;
+        target.addTarget(tile.id, *points);
+      }
+    } catch (const std::invalid_argument& e) {
+      failures.emplace_back(e.what());
+      continue;
+    }
+    tiles_.emplace(id, tile);
+  }
+  if (!aligned.empty()) totals_.points_outside += target.addTiles(aligned, tile_size_);
+}
+
+PointCloud MapUpdateWorker::readTile(const std::string& path) {
+  const auto start = Clock::now();
+  PointCloud points = readPcdXyz(path);
+  totals_.tile_read_ms += msSince(start);
+  ++totals_.tiles_read;
+  totals_.tile_points_read += points.size();
+  return points;
+}
+
+void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const TileFileChange& change,
+                                     std::vector<std::string>& failures) {
+  if (!isDirectory(change.dir))
+    throw std::invalid_argument("tile directory '" + change.dir + "' does not exist; keeping the " +
+                                std::to_string(tiles_.size()) + " tiles loaded (check the provider's tiles/dir)");
+  const bool same_source = change.dir == tile_dir_ && change.index_revision == index_revision_;
+  if (!change.reset && !same_source)
+    throw std::invalid_argument("tile directory '" + change.dir + "' (index revision '" + change.index_revision +
+                                "') is not the one the loaded tiles came from ('" + tile_dir_ + "', revision '" +
+                                index_revision_ + "') and the change is not a reset; change ignored");
+  if (!same_source) cache_.clear();  // cached tiles of another directory or revision are other tiles
+  startTiles(target, change.reset, grid_size);
+  tile_dir_ = change.dir;
+  index_revision_ = change.index_revision;
+  prefetch_.assign(change.prefetch.rbegin(), change.prefetch.rend());  // read from the back: first id first
+  removeTiles(target, change.removed);
+  // Tiles are folded in batches of about kFoldBatchPoints: one target update (each touched shard copied once) per
+  // batch instead of per tile, while the points waiting to be folded stay bounded.
+  std::vector<std::pair<std::string, PointCloud>> pending;
+  std::size_t pending_points = 0;
+  const auto fold = [&] {
+    std::vector<std::pair<std::string, const PointCloud*>> batch;
+    for (const auto& tile : pending) batch.emplace_back(tile.first, &tile.second);
+    const auto start = Clock::now();
+    addTiles(target, batch, failures);
+    totals_.tile_fold_ms += msSince(start);
+    pending.clear();
+    pending_points = 0;
+  };
+  for (const std::string& id : change.added) {
+    const std::string path = change.dir + "/" + id + ".pcd";
+    try {
+      std::optional<PointCloud> points = cache_.take(path);
+      if (points)
+        ++totals_.cache_hits;
+      else
+        points = readTile(path);
+      pending_points += points->size();
+      pending.emplace_back(id, std::move(*points));
+    } catch (const std::exception& e) {  // PcdReadError names the file
+      failures.push_back("tile " + id + " skipped: " + e.what());
+    }
+    if (pending_points >= kFoldBatchPoints) fold();
+  }
+  fold();
+}
+
+void MapUpdateWorker::readAhead() {
+  for (;;) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (stop_ || !queue_.empty() || prefetch_.empty()) return;
+      cache_.setBudget(cache_budget_);
+    }
+    const std::string id = prefetch_.back();
+    prefetch_.pop_back();
+    const std::string path = tile_dir_ + "/" + id + ".pcd";
+    if (tiles_.count(id) || cache_.contains(path) || cache_.budget() == 0) continue;
+    try {
+      cache_.put(path, readTile(path));
+    } catch (const std::exception&) {
+      // Reported when the tile enters the window and is read again.
+    }
   }
 }
 
@@ -150,10 +325,12 @@ void MapUpdateWorker::run() {
     retired.swap(retired_);
     working_ = !batch.empty();
     releasing_ = !retired.empty();
+    const std::size_t budget = cache_budget_;
     lock.unlock();
 
     // Old snapshots the scan thread handed back are freed here (when no other holder is left).
     retired.clear();
+    cache_.setBudget(budget);
     std::shared_ptr<const VoxelMap> snapshot;
     std::vector<std::string> failures;
     double ms = 0.0;
@@ -161,7 +338,7 @@ void MapUpdateWorker::run() {
       const auto start = std::chrono::steady_clock::now();
       for (const MapChange& change : batch) {
         try {
-          apply(target, change);
+          apply(target, change, failures);
         } catch (const std::exception& e) {
           failures.emplace_back(e.what());
         }
@@ -176,18 +353,29 @@ void MapUpdateWorker::run() {
       ++stats_.generation;
       stats_.update_ms = ms;
       stats_.changes = batch.size();
-      stats_.tiles = tile_ids_.size();
+      stats_.tiles = tiles_.size();
+      stats_.tile_aligned = aligned_;
       stats_.voxels = snapshot->gaussianCount();
       stats_.points = snapshot->pointCount();
       errors_.insert(errors_.end(), failures.begin(), failures.end());
     }
     working_ = false;
     releasing_ = false;
+    prefetching_ = !prefetch_.empty();
     // Freeing the applied batch (large clouds) is the worker's job, not the scan thread's.
     lock.unlock();
     batch.clear();
+    readAhead();
     returnFreedMemory();
     lock.lock();
+    prefetching_ = false;
+    stats_.tiles_read = totals_.tiles_read;
+    stats_.tile_points_read = totals_.tile_points_read;
+    stats_.tile_read_ms = totals_.tile_read_ms;
+    stats_.tile_fold_ms = totals_.tile_fold_ms;
+    stats_.cache_hits = totals_.cache_hits;
+    stats_.points_outside = totals_.points_outside;
+    stats_.cache_bytes = cache_.bytes();
     if (queue_.empty() && retired_.empty()) idle_.notify_all();
   }
 }

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
+#include <unordered_set>
 
 #include "omp_threads.hpp"
 
@@ -92,7 +93,7 @@ VoxelKey VoxelMap::keyOf(const Eigen::Vector3f& p) const {
 
 const VoxelStats* VoxelMap::stats(const VoxelKey& key) const {
   const std::uint64_t h = hash(key);
-  const Shard* s = shards_[shardOf(h)].get();
+  const Shard* s = shards_[shardOf(key)].get();
   if (!s) return nullptr;
   const std::int32_t i = s->indexOf(key, h);
   return i >= 0 ? &s->stats[i] : nullptr;
@@ -158,7 +159,7 @@ std::vector<std::pair<VoxelKey, VoxelStats>> voxelStatistics(const PointCloud& p
       if (!finite[i]) continue;
       keys[i] = {static_cast<std::int32_t>(std::floor(p.x() * inv)), static_cast<std::int32_t>(std::floor(p.y() * inv)),
                  static_cast<std::int32_t>(std::floor(p.z() * inv))};
-      shard[i] = static_cast<std::uint32_t>(VoxelMap::shardOf(VoxelMap::hash(keys[i])));
+      shard[i] = static_cast<std::uint32_t>(VoxelMap::shardOf(keys[i]));
       ++hist[t][shard[i] + 1];
     }
   }
@@ -259,6 +260,106 @@ bool NdtTarget::removeTarget(TargetId id) {
   return true;
 }
 
+int voxelsPerTileSide(double tile_size, double resolution) {
+  if (!(tile_size > 0.0 && resolution > 0.0) || !std::isfinite(tile_size / resolution)) return 0;
+  const double m = tile_size / resolution;
+  const double whole = std::round(m);
+  return whole >= 1.0 && whole < 1e6 && std::abs(m - whole) <= 1e-9 * m ? static_cast<int>(whole) : 0;
+}
+
+namespace {
+
+std::int64_t floorDiv(std::int64_t a, std::int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
+// One int64 per tile for set lookups (exact for |i|, |j| < 2^31, like tiles/directory.py's codes).
+std::int64_t tileCode(std::int64_t i, std::int64_t j) {
+  return static_cast<std::int64_t>((static_cast<std::uint64_t>(i) << 32) |
+                                   (static_cast<std::uint64_t>(j) & 0xFFFFFFFFu));
+}
+
+int checkedVoxelsPerTile(double tile_size, double resolution) {
+  const int m = voxelsPerTileSide(tile_size, resolution);
+  if (m == 0)
+    throw std::invalid_argument("tile side " + std::to_string(tile_size) +
+                                " m is not a whole multiple of the NDT resolution " + std::to_string(resolution) +
+                                " m, so voxels would straddle tiles");
+  return m;
+}
+
+}  // namespace
+
+std::size_t NdtTarget::addTile(const TileKey& key, double tile_size, const PointCloud& points) {
+  return addTiles({{key, &points}}, tile_size);
+}
+
+std::size_t NdtTarget::addTiles(const std::vector<std::pair<TileKey, const PointCloud*>>& tiles, double tile_size) {
+  const std::int64_t m = checkedVoxelsPerTile(tile_size, params_.resolution);
+  const double inv = 1.0 / params_.resolution;
+  // The same voxel index as voxelStatistics computes, so the owner test agrees with the voxel a point lands in.
+  const auto inside = [&](const Point& p, const TileKey& key) {
+    const Eigen::Vector3d d = p.cast<double>();
+    return floorDiv(static_cast<std::int32_t>(std::floor(d.x() * inv)), m) == key.i &&
+           floorDiv(static_cast<std::int32_t>(std::floor(d.y() * inv)), m) == key.j;
+  };
+  std::size_t total = 0;
+  for (const auto& tile : tiles) total += tile.second->size();
+  // One cloud, tile after tile in their own order: a voxel's points are summed in the order of its tile's file,
+  // as in a from-scratch build of the same tiles.
+  PointCloud kept;
+  kept.reserve(total);
+  std::size_t outside = 0;
+  for (const auto& [key, points] : tiles)
+    for (const Point& p : *points) {
+      if (!p.allFinite()) continue;
+      if (inside(p, key))
+        kept.push_back(p);
+      else
+        ++outside;
+    }
+  const Delta delta = voxelStatistics(kept, params_.resolution, params_.threads);
+  kept = PointCloud();
+  apply(delta, false, current_);
+  return outside;
+}
+
+void NdtTarget::removeTiles(const std::vector<TileKey>& keys, double tile_size) {
+  const std::int64_t m = checkedVoxelsPerTile(tile_size, params_.resolution);
+  if (keys.empty()) return;
+  std::unordered_set<std::int64_t> gone;
+  for (const TileKey& k : keys) gone.insert(tileCode(k.i, k.j));
+  const auto owned = [&](const VoxelKey& v) { return gone.count(tileCode(floorDiv(v.x, m), floorDiv(v.y, m))) != 0; };
+  std::shared_ptr<const VoxelMap> base = current_;
+  auto next = std::make_shared<VoxelMap>(*base);
+  std::vector<std::int64_t> d_vox(VoxelMap::kShards, 0), d_gauss(VoxelMap::kShards, 0), d_pts(VoxelMap::kShards, 0);
+  const int nt = resolveThreads(params_.threads);
+  // Every shard is scanned (a tile's voxels hash to all of them); only shards that lose a voxel are copied.
+#pragma omp parallel for num_threads(nt) schedule(dynamic, 16)
+  for (std::size_t s = 0; s < VoxelMap::kShards; ++s) {
+    const VoxelMap::Shard* old = base->shards_[s].get();
+    if (!old || std::none_of(old->keys.begin(), old->keys.end(), owned)) continue;
+    auto shard = std::make_shared<VoxelMap::Shard>();
+    for (std::size_t i = 0; i < old->keys.size(); ++i) {
+      if (owned(old->keys[i])) {
+        --d_vox[s];
+        d_gauss[s] -= old->gaussians[i].valid;
+        d_pts[s] -= old->stats[i].count;
+        continue;
+      }
+      shard->keys.push_back(old->keys[i]);
+      shard->stats.push_back(old->stats[i]);
+      shard->gaussians.push_back(old->gaussians[i]);
+    }
+    rebuildSlots(*shard);
+    next->setShard(s, shard->keys.empty() ? nullptr : std::shared_ptr<const VoxelMap::Shard>(std::move(shard)));
+  }
+  for (std::size_t s = 0; s < VoxelMap::kShards; ++s) {
+    next->voxels_ = static_cast<std::size_t>(static_cast<std::int64_t>(next->voxels_) + d_vox[s]);
+    next->gaussians_ = static_cast<std::size_t>(static_cast<std::int64_t>(next->gaussians_) + d_gauss[s]);
+    next->points_ = static_cast<std::size_t>(static_cast<std::int64_t>(next->points_) + d_pts[s]);
+  }
+  publish(std::move(next));
+}
+
 bool NdtTarget::hasTarget(TargetId id) const { return contributions_.count(id) != 0; }
 
 std::vector<TargetId> NdtTarget::targetIds() const {
@@ -274,9 +375,9 @@ void NdtTarget::apply(const Delta& delta, bool subtract, std::shared_ptr<const V
   // delta is grouped by shard (voxelStatistics sorts it so): find each shard's range.
   std::vector<std::pair<std::size_t, std::size_t>> ranges;  // [begin, end) per touched shard
   for (std::size_t b = 0; b < delta.size();) {
-    const std::size_t s = VoxelMap::shardOf(VoxelMap::hash(delta[b].first));
+    const std::size_t s = VoxelMap::shardOf(delta[b].first);
     std::size_t e = b + 1;
-    while (e < delta.size() && VoxelMap::shardOf(VoxelMap::hash(delta[e].first)) == s) ++e;
+    while (e < delta.size() && VoxelMap::shardOf(delta[e].first) == s) ++e;
     ranges.emplace_back(b, e);
     b = e;
   }
@@ -285,7 +386,7 @@ void NdtTarget::apply(const Delta& delta, bool subtract, std::shared_ptr<const V
   bool missing = false;
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 4) reduction(|| : missing)
   for (std::size_t r = 0; r < ranges.size(); ++r) {
-    const std::size_t s = VoxelMap::shardOf(VoxelMap::hash(delta[ranges[r].first].first));
+    const std::size_t s = VoxelMap::shardOf(delta[ranges[r].first].first);
     const VoxelMap::Shard* old = base->shards_[s].get();
     auto shard = old ? std::make_shared<VoxelMap::Shard>(*old) : std::make_shared<VoxelMap::Shard>();
     const std::int64_t vox_before = static_cast<std::int64_t>(shard->keys.size());

@@ -99,6 +99,14 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
   pnh.getParam("publish_tf", p.publish_tf);
   pnh.getParam("publish_aligned_points", p.publish_aligned_points);
   pnh.getParam("resend_service", p.resend_service);
+  double cache_mb = p.tile_cache_mb;
+  if (pnh.getParam("tiles/cache_mb", cache_mb)) {
+    if (cache_mb >= 0.0)
+      p.tile_cache_mb = cache_mb;
+    else
+      ROS_WARN("%s: parameter ~tiles/cache_mb = %g must be >= 0 MiB; using the default %g instead", log_name.c_str(),
+               cache_mb, p.tile_cache_mb);
+  }
   c.output_aligned = p.publish_aligned_points;
 
   std::vector<double> pose;

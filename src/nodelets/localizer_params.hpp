@@ -22,7 +22,9 @@ struct LocalizerRosParams {
   bool publish_tf = true;
   bool publish_aligned_points = false;
   std::string resend_service = "tile_provider/resend";  ///< tiles mode: std_srvs/Trigger on a revision gap
-  std::optional<Eigen::Isometry3d> initial_pose;        ///< from ~initial_pose [x y z roll pitch yaw]
+  /// tiles mode by reference: byte budget of the read-ahead cache [MiB], >= 0 (0 = no prefetch).
+  double tile_cache_mb = MapUpdateWorker::kDefaultTileCacheMb;
+  std::optional<Eigen::Isometry3d> initial_pose;  ///< from ~initial_pose [x y z roll pitch yaw]
   /// Per-point time field of the scans: FLOAT32/FLOAT64 [s] or UINT32 [ns] after header.stamp.
   std::string time_field = "time";
 };

@@ -42,6 +42,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       throw;
     }
     if (params_.initial_pose) localizer_->setDefaultInitialPose(*params_.initial_pose);
+    localizer_->map().setTileCacheMb(params_.tile_cache_mb);
 
     tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
     tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
@@ -78,7 +79,8 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
 
   void onTileDelta(const TileDelta::ConstPtr& msg) {
     if (!checkMapFrame(msg->header.frame_id, "tile_delta")) return;
-    if (msg->added_ids.size() != msg->added_clouds.size()) {
+    const bool by_reference = !msg->tile_dir.empty();
+    if (!by_reference && msg->added_ids.size() != msg->added_clouds.size()) {
       NODELET_ERROR("tile_delta revision %u: %zu added ids but %zu clouds; the provider must send one cloud per id",
                     msg->revision, msg->added_ids.size(), msg->added_clouds.size());
       return;
@@ -100,10 +102,21 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       case TileDeltaSequence::Verdict::kApply:
         break;
     }
+    if (voxelsPerTileSide(msg->grid_size, params_.core.ndt.resolution) == 0)
+      NODELET_WARN_ONCE(
+          "tile side %g m is not a whole multiple of ~ndt/resolution %g m: voxels straddle tiles, so each tile's "
+          "statistics are kept as well (more memory per voxel); use a resolution that divides the tile side",
+          msg->grid_size, params_.core.ndt.resolution);
+    if (by_reference) {  // the map worker reads the files
+      localizer_->map().submit(MapChange::tileFiles(
+          msg->grid_size,
+          {msg->tile_dir, msg->index_revision, msg->reset, msg->added_ids, msg->removed_ids, msg->prefetch_ids}));
+      return;
+    }
     try {
       std::vector<TileCloud> added(msg->added_ids.size());
       for (std::size_t i = 0; i < added.size(); ++i) added[i] = {msg->added_ids[i], fromMsg(msg->added_clouds[i])};
-      localizer_->map().submit(MapChange::tiles(msg->reset, std::move(added), msg->removed_ids));
+      localizer_->map().submit(MapChange::tiles(msg->reset, msg->grid_size, std::move(added), msg->removed_ids));
     } catch (const std::invalid_argument& e) {
       NODELET_ERROR("tile_delta revision %u: %s", msg->revision, e.what());
     }

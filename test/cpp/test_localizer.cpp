@@ -153,7 +153,7 @@ TEST(Localizer, TilesChangingDuringTheDriveMatchTheFullMap) {
       for (const auto& id : loaded)
         if (!want.count(id)) removed.push_back(id);
       removals += removed.size();
-      tiled.map().submit(gpl::MapChange::tiles(loaded.empty(), std::move(added), std::move(removed)));
+      tiled.map().submit(gpl::MapChange::tiles(loaded.empty(), 0.0, std::move(added), std::move(removed)));
       loaded = want;
       tiled.map().waitIdle();
     }

@@ -87,10 +87,10 @@ TEST(MapUpdateWorker, TileSequenceEqualsASynchronousBuildOfTheRemainingTiles) {
   // Window 1: first 12 tiles (reset), then slide: drop 4, add 4, replace one in place, remove an unknown id.
   std::vector<gpl::TileCloud> first;
   for (int i = 0; i < 12; ++i) first.push_back(tileCloud(ids[i]));
-  worker.submit(gpl::MapChange::tiles(true, first, {}));
-  worker.submit(gpl::MapChange::tiles(false, {tileCloud(ids[12]), tileCloud(ids[13]), tileCloud(ids[14])},
+  worker.submit(gpl::MapChange::tiles(true, 0.0, first, {}));
+  worker.submit(gpl::MapChange::tiles(false, 0.0, {tileCloud(ids[12]), tileCloud(ids[13]), tileCloud(ids[14])},
                                       {ids[0], ids[1], ids[2], "not_loaded"}));
-  worker.submit(gpl::MapChange::tiles(false, {tileCloud(ids[5]), tileCloud(ids[15])}, {ids[3]}));
+  worker.submit(gpl::MapChange::tiles(false, 0.0, {tileCloud(ids[5]), tileCloud(ids[15])}, {ids[3]}));
   worker.waitIdle();
   const auto incremental = worker.takeReady();
   ASSERT_NE(incremental, nullptr);
@@ -112,7 +112,7 @@ TEST(MapUpdateWorker, TileSequenceEqualsASynchronousBuildOfTheRemainingTiles) {
   EXPECT_LT((a.transform - b.transform).norm(), 1e-4f);
   EXPECT_EQ(a.iterations, b.iterations);
   // A reset drops everything loaded before.
-  worker.submit(gpl::MapChange::tiles(true, {tileCloud(ids[0])}, {}));
+  worker.submit(gpl::MapChange::tiles(true, 0.0, {tileCloud(ids[0])}, {}));
   worker.waitIdle();
   EXPECT_EQ(worker.takeReady()->pointCount(), tiles.at(ids[0]).size());
 }

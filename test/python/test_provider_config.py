@@ -29,10 +29,10 @@ def test_yaml_documents_every_parameter_with_its_default_and_sets_none():
 
 
 def test_load_config_reads_groups_and_converts_types():
-    given = {"tiles/dir": "/maps/t", "window/n": 17, "tiles/cache_mb": 8, "publish_map_cloud": False}
+    given = {"tiles/dir": "/maps/t", "window/n": 17, "tiles/grid_size": 2, "publish_map_cloud": True}
     cfg = load_config(lambda name, default: given.get(name, default))
-    assert cfg.tiles.dir == "/maps/t" and cfg.window.n == 17 and cfg.tiles.cache_mb == 8.0
-    assert isinstance(cfg.tiles.cache_mb, float) and cfg.publish_map_cloud is False
+    assert cfg.tiles.dir == "/maps/t" and cfg.window.n == 17 and cfg.tiles.grid_size == 2.0
+    assert isinstance(cfg.tiles.grid_size, float) and cfg.publish_map_cloud is True
     assert cfg.checked().window.k == 20
 
 

@@ -1,17 +1,16 @@
-"""Streamed messages against genpy's own serialisation of the equivalent plain messages (byte for byte)."""
+"""Streamed clouds against genpy's own serialisation of the equivalent plain clouds (byte for byte)."""
 
 import io
 
 import genpy
 import numpy as np
 import pytest
-from grid_puzzle_localization.msg import TileDelta
 from rospy.msg import serialize_message
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
-from grid_puzzle_localization.ros.msgs.cloud import array_to_cloud, cloud_from_parts, cloud_to_array
-from grid_puzzle_localization.ros.msgs.streamed import StreamedCloud, StreamedTileDelta
+from grid_puzzle_localization.ros.msgs.cloud import cloud_from_parts, cloud_to_array
+from grid_puzzle_localization.ros.msgs.streamed import StreamedCloud
 
 XYZI = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("intensity", "<f4")])
 MIXED = np.dtype([("x", "<f8"), ("y", "<f8"), ("z", "<f8"), ("ring", "<u2"), ("normal", "<f4", (3,))])
@@ -82,43 +81,3 @@ def test_parts_of_another_dtype_or_not_contiguous_are_refused():
         wire(StreamedCloud(header(), XYZI, lambda: [points(4, MIXED, 0)], True))
     with pytest.raises(ValueError, match="contiguous array"):
         wire(StreamedCloud(header(), XYZI, lambda: [points(8, XYZI, 0)[::2]], True))
-
-
-def plain_delta(arrays, **fields):
-    h = fields["header"]
-    clouds = [array_to_cloud(a, header=Header(frame_id=h.frame_id, stamp=h.stamp)) for a in arrays]
-    return TileDelta(added_clouds=clouds, **fields)
-
-
-DELTA_FIELDS = dict(
-    revision=12,
-    reset=True,
-    grid_size=2.0,
-    added_ids=["1_3", "-1_-3", "5_7"],
-    removed_ids=["9_9", "11_-1"],
-    i_min=-3,
-    i_max=40,
-    j_min=-(2**40),
-    j_max=2**40,
-)
-
-
-@pytest.mark.parametrize("dtype", [XYZI, MIXED])
-def test_streamed_tile_delta_serialises_like_the_plain_delta(dtype):
-    arrays = [points(n, dtype, seed) for seed, n in enumerate([10, 0, 33])]
-    fields = dict(DELTA_FIELDS, header=header())
-    streamed = StreamedTileDelta(arrays, True, **fields)
-    assert wire(streamed, seq=3) == wire(plain_delta(arrays, **dict(DELTA_FIELDS, header=header())), seq=3)
-    back = TileDelta().deserialize(wire(streamed))
-    assert [cloud_to_array(c).tobytes() for c in back.added_clouds] == [a.tobytes() for a in arrays]
-    assert list(back.removed_ids) == DELTA_FIELDS["removed_ids"] and back.j_min == -(2**40)
-
-
-def test_an_empty_streamed_delta_serialises_like_the_plain_one():
-    fields = dict(DELTA_FIELDS, added_ids=[], removed_ids=[], reset=False, header=header())
-    assert wire(StreamedTileDelta([], True, **fields)) == wire(plain_delta([], **fields))
-
-
-def test_a_streamed_delta_needs_one_array_per_added_id():
-    with pytest.raises(ValueError, match="3 added ids but 2 point arrays"):
-        StreamedTileDelta([points(1, XYZI, 0)] * 2, True, **dict(DELTA_FIELDS, header=header()))

@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Runs grid_puzzle_map_provider on a small tiled map written into a temp dir and drives poses along a
-path with turns. Checks the deltas, the merged map_cloud and the status against a brute-force selection
-over the directory listing, and the standing start, a corrupt tile, late subscribers, ~resend, a pose
-far off the map and a missing tile directory."""
+path with turns. Checks the deltas (tiles by reference), the merged map_cloud (switched on here) and the
+status against a brute-force selection over the directory listing, and the standing start, a corrupt tile
+(named in the deltas, left out of map_cloud: the localizer reports it), late subscribers, ~resend, a pose
+far off the map, a tile directory rewritten under the node and a missing tile directory."""
 
 import math
 import os
@@ -26,8 +27,7 @@ from std_srvs.srv import Trigger
 
 from grid_puzzle_localization.pcd import read_pcd
 from grid_puzzle_localization.ros.msgs.cloud import cloud_to_array
-from grid_puzzle_localization.tiles.grid import parse_tile_stem, tile_filename
-from grid_puzzle_localization.util.iteration import zip_equal
+from grid_puzzle_localization.tiles.grid import parse_tile_stem, tile_filename, tile_stem
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "python"))
 from tile_truth import brute_force_window_files
@@ -62,7 +62,7 @@ def expected_bounds(x, y, heading_deg):
 
 
 def tile_file_points(directory, key):
-    """x, y, z of a tile file (the provider keeps only those by default, as float32)."""
+    """x, y, z of a tile file (map_cloud carries only those, as float32)."""
     points = read_pcd(os.path.join(directory, tile_filename(*key, S))).points
     out = np.empty(len(points), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
     for name in "xyz":
@@ -105,8 +105,8 @@ class MapProviderTest(unittest.TestCase):
         corrupt = os.path.join(cls.dir, tile_filename(*CORRUPT, S))
         with open(corrupt, "r+b") as f:
             f.truncate(os.path.getsize(corrupt) - 5)
-        cls.corrupt_path = corrupt
-        for name, value in {"tiles/dir": cls.dir, "tiles/grid_size": S, "window/n": N, "window/k": K}.items():
+        params = {"tiles/dir": cls.dir, "tiles/grid_size": S, "window/n": N, "window/k": K, "publish_map_cloud": True}
+        for name, value in params.items():
             rospy.set_param(f"/provider/{name}", value)
         cls.deltas = Recorder("/tile_delta", TileDelta)
         cls.clouds = Recorder("/map_cloud", PointCloud2)
@@ -119,8 +119,9 @@ class MapProviderTest(unittest.TestCase):
             time.monotonic() < deadline
         ):
             rospy.sleep(0.1)
-        cls.mirror = {}
+        cls.mirror = set()
         cls.last_revision = 0
+        cls.prefetched = 0
 
     @classmethod
     def tearDownClass(cls):
@@ -143,21 +144,26 @@ class MapProviderTest(unittest.TestCase):
         for d in new:
             self.assertEqual(d.revision, MapProviderTest.last_revision + 1)
             MapProviderTest.last_revision = d.revision
+            self.assertEqual((d.tile_dir, len(d.added_clouds)), (self.dir, 0), "by reference: names, no points")
+            self.assertTrue(d.index_revision)
             if d.reset:
                 self.mirror.clear()
             for tile_id in d.removed_ids:
-                del self.mirror[parse_tile_stem(tile_id, S)]
-            for tile_id, cloud in zip_equal(d.added_ids, d.added_clouds):
+                self.mirror.remove(parse_tile_stem(tile_id, S))
+            for tile_id in d.added_ids:
                 key = parse_tile_stem(tile_id, S)
-                points = cloud_to_array(cloud)
-                self.assertEqual(points.tobytes(), tile_file_points(self.dir, key).tobytes())
-                self.mirror[key] = points
-            truth = brute_force_window_files(self.dir, (d.i_min, d.i_max, d.j_min, d.j_max), S) - {CORRUPT}
-            self.assertEqual(set(self.mirror), truth, f"delta {d.revision}")
+                self.assertNotIn(key, self.mirror)
+                self.mirror.add(key)
+            bounds = (d.i_min, d.i_max, d.j_min, d.j_max)
+            self.assertEqual(self.mirror, brute_force_window_files(self.dir, bounds, S), f"delta {d.revision}")
+            prefetch = {parse_tile_stem(t, S) for t in d.prefetch_ids}
+            self.assertFalse(prefetch & self.mirror, "prefetch names tiles outside the window")
+            self.assertTrue(all(os.path.exists(os.path.join(self.dir, tile_filename(*k, S))) for k in prefetch))
+            MapProviderTest.prefetched += len(prefetch)
         return new
 
     def assert_map_cloud_is(self, keys):
-        expected = [tile_file_points(self.dir, k) for k in sorted(keys)]
+        expected = [tile_file_points(self.dir, k) for k in sorted(keys - {CORRUPT})]
         want = xyz_sorted(np.concatenate(expected)) if expected else np.empty((0, 3))
 
         def matches(cloud):
@@ -194,9 +200,9 @@ class MapProviderTest(unittest.TestCase):
         status = self.status.wait_for(lambda m: (m.i_min, m.i_max, m.j_min, m.j_max) == final, "final status")
         self.assertEqual(status.sector, 3)
         self.assertAlmostEqual(math.degrees(status.theta), 135.0, places=6)
-        self.assertEqual(list(status.corrupt_tiles), [self.corrupt_path])
         self.assertEqual(status.tiles_loaded, len(self.mirror))
-        self.assertEqual(status.points, sum(len(p) for p in self.mirror.values()))
+        self.assertEqual(status.tile_dir, self.dir)
+        self.assertGreater(MapProviderTest.prefetched, 0, "a heading was known: tiles ahead must be named")
 
     def test_3_late_subscriber_gets_a_reset_and_resend_broadcasts_one(self):
         # A subscriber in another process: rospy shares one connection among a process's subscribers.
@@ -217,7 +223,7 @@ class MapProviderTest(unittest.TestCase):
         self.send(5000.0, 5000.0)
         self.deltas.wait_for(lambda d: d.i_min > 2000 and not d.added_ids, "an empty window far away")
         self.apply_new_deltas()
-        self.assertEqual(self.mirror, {})
+        self.assertEqual(self.mirror, set())
         self.assert_map_cloud_is(set())
         self.send(5.3, 5.3)
         back = expected_bounds(5.3, 5.3, 225.0)
@@ -226,7 +232,20 @@ class MapProviderTest(unittest.TestCase):
         self.assertTrue(self.mirror)
         self.assert_map_cloud_is(set(self.mirror))
 
-    def test_5_missing_tile_directory_exits_with_a_clear_message(self):
+    def test_5_a_rewritten_directory_is_sent_again_as_a_reset_with_a_new_revision(self):
+        self.apply_new_deltas()
+        with self.deltas.cond:
+            old = self.deltas.messages[-1].index_revision
+        key = sorted(self.mirror - {CORRUPT})[0]
+        write_tiles(self.dir, [key], S, count=31, seed=8)  # written by rename: the directory changes
+        self.send(5.3, 5.3)
+        fresh = self.deltas.wait_for(lambda d: d.index_revision != old, "a delta of the new revision")
+        self.assertTrue(fresh.reset)
+        self.assertIn(tile_stem(*key, S), fresh.added_ids)
+        self.apply_new_deltas()
+        self.assert_map_cloud_is(set(self.mirror))
+
+    def test_6_missing_tile_directory_exits_with_a_clear_message(self):
         rospy.set_param("/broken_provider/tiles/dir", os.path.join(self.dir, "nope"))
         rospy.set_param("/broken_provider/tiles/grid_size", S)
         script = os.path.join(rospkg.RosPack().get_path(PKG), "scripts", "grid_puzzle_map_provider")

@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
 """Rostest of the NDT localizer nodelet on a synthetic drive (see ndt_localizer.test).
 
-Writes the bag with the rosbag API, publishes the map (latched map_cloud) and tile deltas built from the
-same scene around the ground-truth position (with one deliberately skipped revision, to exercise the
-resend service), replays the bag with `rosbag play --clock` and compares the trajectories."""
+Writes the bag with the rosbag API, publishes the map (latched map_cloud), writes the same map as tile files
+and publishes tile deltas by reference (tile names and their directory, as grid_puzzle_map_provider does)
+around the ground-truth position (with one deliberately skipped revision, to exercise the resend service),
+replays the bag with `rosbag play --clock` and compares the trajectories."""
 
 from __future__ import annotations
 
@@ -26,6 +27,8 @@ from scipy.spatial.transform import Rotation
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger, TriggerResponse
 
+from grid_puzzle_localization.pcd import write_pcd
+from grid_puzzle_localization.pcd.reader import XYZ_DTYPE
 from grid_puzzle_localization.tiles import grid
 
 START = 1000.0  # bag time of the first scan [s]
@@ -35,13 +38,22 @@ OFFSET = ss.pose_matrix(np.array([0.8, 0.6, 0.0]), np.deg2rad(5.0))  # 1 m, 5 de
 
 
 class TileDeltaPublisher:
-    """A minimal tile provider: a square window around the ground-truth position, incremental deltas,
-    a reset on `resend`. Skips one revision on purpose (the second window change)."""
+    """A minimal tile provider: tile files in ``tile_dir``, a square window around the ground-truth position,
+    incremental deltas by reference, a reset on `resend`. Skips one revision on purpose (the second window
+    change)."""
 
-    def __init__(self, points: np.ndarray) -> None:
-        ij = grid.tile_index(points[:, :2], TILE)
+    def __init__(self, points: np.ndarray, tile_dir: Path) -> None:
+        points = points.astype(np.float32)  # tiled as stored, so no float64 border point changes tile
+        ij = grid.tile_index(points[:, :2].astype(np.float64), TILE)
         keys, inverse = np.unique(ij, axis=0, return_inverse=True)
         self.tiles = {(int(i), int(j)): points[inverse.ravel() == k] for k, (i, j) in enumerate(keys)}
+        self.tile_dir = tile_dir
+        tile_dir.mkdir()
+        for (i, j), tile in self.tiles.items():
+            records = np.zeros(len(tile), dtype=XYZ_DTYPE)
+            for axis, name in enumerate("xyz"):
+                records[name] = tile[:, axis]
+            write_pcd(tile_dir / grid.tile_filename(i, j, TILE), records)
         self.loaded: set[tuple[int, int]] = set()
         self.revision = 0
         self.changes = 0
@@ -58,8 +70,9 @@ class TileDeltaPublisher:
             revision=self.revision,
             reset=reset,
             grid_size=TILE,
+            tile_dir=str(self.tile_dir),
+            index_revision="1",
             added_ids=[grid.tile_stem(i, j, TILE) for i, j in added],
-            added_clouds=[xyz_cloud(self.tiles[k], header) for k in added],
             removed_ids=[grid.tile_stem(i, j, TILE) for i, j in removed],
         )
 
@@ -119,7 +132,7 @@ class NdtLocalizerTest(unittest.TestCase):
         cls.tracks = {name: Trajectory(f"/{name}/odom") for name in ("cloud", "tiles", "offset")}
         cls.statuses: list[NdtStatus] = []
         rospy.Subscriber("/tiles/ndt_localizer/status", NdtStatus, cls.statuses.append)
-        cls.tiles = TileDeltaPublisher(map_points)
+        cls.tiles = TileDeltaPublisher(map_points, Path(cls.tmp.name) / "tiles")
         map_pub = rospy.Publisher("/map_cloud", type(xyz_cloud(map_points[:1], Header())), queue_size=1, latch=True)
         map_pub.publish(xyz_cloud(map_points, Header(frame_id="map")))
         pose_pub = rospy.Publisher("/offset/initialpose", PoseWithCovarianceStamped, queue_size=1, latch=True)

@@ -19,8 +19,6 @@ POSE_SOURCES = ("odom", "pose")
 class TilesConfig:
     dir: str = ""  # tile directory written by `gpm tile` (required)
     grid_size: float = 0.0  # [m] tile side s; 0 = take it from the index (required when there is none)
-    cache_mb: float = 0.0  # [MiB] bound of the prefetch cache; 0 = auto: an eighth of the loaded window's bytes
-    xyz_only: bool = True  # keep x, y, z float32 only (what the localizer reads); false: every field of the files
 
 
 @dataclass(frozen=True)
@@ -28,7 +26,7 @@ class ProviderConfig:
     tiles: TilesConfig = field(default_factory=TilesConfig)
     window: WindowConfig = field(default_factory=WindowConfig)
     pose_source: str = "odom"  # odom: nav_msgs/Odometry on `odom`; pose: PoseWithCovarianceStamped on `pose`
-    publish_map_cloud: bool = True  # publish the merged window on the latched `map_cloud`
+    publish_map_cloud: bool = False  # publish the merged window on the latched `map_cloud` (read while subscribed)
     map_cloud_period: float = 1.0  # [s] publish map_cloud at most this often (the latest window); 0 = every change
     map_frame: str = "map"  # frame of the tiles, the incoming poses and every published cloud
 
@@ -40,8 +38,6 @@ class ProviderConfig:
             raise UserError(
                 f"parameter tiles/grid_size must be > 0 m, or 0 to read it from the index (got {self.tiles.grid_size})"
             )
-        if not self.tiles.cache_mb >= 0.0:
-            raise UserError(f"parameter tiles/cache_mb must be >= 0 MiB (got {self.tiles.cache_mb})")
         if not self.map_cloud_period >= 0.0:
             raise UserError(f"parameter map_cloud_period must be >= 0 s (got {self.map_cloud_period})")
         if self.pose_source not in POSE_SOURCES:

@@ -1,13 +1,14 @@
-"""The latched merged ``map_cloud`` of grid_puzzle_map_provider, published by a thread of its own.
+"""The latched merged ``map_cloud`` of grid_puzzle_map_provider (off by default), published by a thread
+of its own.
 
-The cloud is streamed from the store's tile arrays (streamed_msgs.StreamedCloud): the latched message
-holds no copy of the window, and rospy serialises it, one window-sized copy freed once sent, only while
-the topic has subscribers. At the paper's window (n 25, k 20: up to 71 x 71 tiles, about 90 MB at the
-paper's point density) that copy is still large, so this thread publishes at most once per ``period``
-[s], always the latest window, and the worker never waits for it: the tile deltas the localizer needs
-are not held up by the display cloud. The publisher is synchronous (no queue_size): publish() returns
-once the cloud is sent, so one serialised copy exists at a time, where a queued publisher keeps one
-queued and one in flight besides the one being built when a subscriber (rviz) reads slowly.
+The cloud is streamed from the window's tile files (streamed.StreamedCloud): the latched message holds
+only the way to read them, and rospy serialises it (reading the files into one window-sized copy, freed
+once sent) only while the topic has subscribers, so with nobody subscribed it costs nothing. At the
+paper's window (n 25, k 20: up to 71 x 71 tiles, about 90 MB at the paper's point density) that copy is
+large, so this thread publishes at most once per ``period`` [s], always the latest window, and the
+worker never waits for it: the tile deltas the localizer needs are not held up by the display cloud. The
+publisher is synchronous (no queue_size): publish() returns once the cloud is sent, so one serialised
+copy exists at a time.
 """
 
 from __future__ import annotations
@@ -15,18 +16,38 @@ from __future__ import annotations
 import threading
 import time
 import warnings
+from collections.abc import Callable
+from pathlib import Path
 
+import numpy as np
 import rospy
 from sensor_msgs.msg import PointCloud2
 
-from grid_puzzle_localization.provider.tile_store import TileStore
+from grid_puzzle_localization.errors import PcdError
+from grid_puzzle_localization.pcd.reader import XYZ_DTYPE
 from grid_puzzle_localization.ros.msgs.provider import stamped
 from grid_puzzle_localization.ros.msgs.streamed import StreamedCloud
+from grid_puzzle_localization.tiles.reader import read_tile
+from grid_puzzle_localization.util.malloc_tuning import trim_heap
+
+WARN_PERIOD = 5.0  # [s] throttle of the unreadable-tile warning
+
+
+def read_tiles(paths: list[Path]) -> list[np.ndarray]:
+    """x, y, z of the readable tiles among ``paths``; an unreadable one is logged and left out."""
+    parts = []
+    for path in paths:
+        try:
+            parts.append(read_tile(path, xyz_only=True))
+        except (PcdError, OSError) as err:
+            rospy.logwarn_throttle(WARN_PERIOD, "map_cloud: tile %s left out: %s", path, err)
+    return parts
 
 
 class MapCloudPublisher:
-    def __init__(self, store: TileStore, frame: str, period: float) -> None:
-        self._store = store
+    def __init__(self, window_paths: Callable[[], list[Path]], frame: str, period: float) -> None:
+        """``window_paths()``: the tile files of the current window (called when a subscriber reads)."""
+        self._window_paths = window_paths
         self._frame = frame
         self._period = period
         with warnings.catch_warnings():
@@ -52,5 +73,7 @@ class MapCloudPublisher:
                     continue
                 stamp, self._pending = self._pending, None
             header = stamped(self._frame, stamp)
-            self._pub.publish(StreamedCloud(header, self._store.dtype, self._store.point_arrays, is_dense=True))
+            cloud = StreamedCloud(header, XYZ_DTYPE, lambda: read_tiles(self._window_paths()), is_dense=True)
+            self._pub.publish(cloud)
+            trim_heap()  # the tiles read for the subscribers are freed: give the pages back
             not_before = time.monotonic() + self._period

@@ -1,21 +1,18 @@
 """Messages of grid_puzzle_map_provider: poses in, converted to the pure window types, and tile deltas and
-status out, built from the pure window and store types."""
+status out, built from the pure window and tile reference types. Tile deltas carry tiles by reference
+(names and their directory), never points."""
 
 from __future__ import annotations
 
 import math
 
-import numpy as np
 import rospy
 from std_msgs.msg import Header
 
 from grid_puzzle_localization.msg import ProviderStatus, TileDelta
-from grid_puzzle_localization.provider.tile_store import StoreStats
+from grid_puzzle_localization.provider.tile_references import Key
 from grid_puzzle_localization.provider.window import PoseSample, Window
-from grid_puzzle_localization.ros.msgs.streamed import StreamedTileDelta
 from grid_puzzle_localization.tiles.grid import tile_stem
-
-Key = tuple[int, int]
 
 
 def yaw_of(q) -> float | None:
@@ -42,21 +39,28 @@ def tile_delta(
     reset: bool,
     s: float,
     window: Window,
-    added: list[tuple[Key, np.ndarray]],
+    tile_dir: str,
+    index_revision: str,
+    added: list[Key],
     removed: list[Key],
+    prefetch: list[Key],
 ) -> TileDelta:
-    """A TileDelta whose added clouds are serialised straight from the tile arrays (msgs/streamed.py).
-    The clouds are dense: the tile reader keeps only points with finite x, y, z."""
+    """A TileDelta by reference: the localizer reads ``tile_dir``/<id>.pcd itself."""
     i_min, i_max, j_min, j_max = window.bounds
-    return StreamedTileDelta(
-        [points for _, points in added],
-        True,
+
+    def stems(keys: list[Key]) -> list[str]:
+        return [tile_stem(i, j, s) for i, j in keys]
+
+    return TileDelta(
         header=header,
         revision=revision,
         reset=reset,
         grid_size=s,
-        added_ids=[tile_stem(i, j, s) for (i, j), _ in added],
-        removed_ids=[tile_stem(i, j, s) for i, j in removed],
+        tile_dir=tile_dir,
+        index_revision=index_revision,
+        added_ids=stems(added),
+        removed_ids=stems(removed),
+        prefetch_ids=stems(prefetch),
         i_min=i_min,
         i_max=i_max,
         j_min=j_min,
@@ -65,20 +69,19 @@ def tile_delta(
 
 
 def provider_status(
-    header: Header, window: Window, stats: StoreStats, load_ms: float, update_ms: float
+    header: Header, window: Window, delta: TileDelta, tiles_loaded: int, update_ms: float
 ) -> ProviderStatus:
     msg = ProviderStatus(header=header)
     msg.i_min, msg.i_max, msg.j_min, msg.j_max = window.bounds
     msg.theta = window.theta if math.isfinite(window.theta) else math.nan
     msg.sector = window.sector
-    msg.tiles_loaded = stats.tiles_loaded
-    msg.points = stats.points
-    msg.bytes = stats.bytes
-    msg.load_ms = load_ms
+    msg.tile_dir = delta.tile_dir
+    msg.index_revision = delta.index_revision
+    msg.tiles_loaded = tiles_loaded
+    msg.tiles_added = len(delta.added_ids)
+    msg.tiles_removed = len(delta.removed_ids)
+    msg.tiles_prefetch = len(delta.prefetch_ids)
     msg.update_ms = update_ms
-    msg.cache_hits = stats.cache_hits
-    msg.cache_misses = stats.cache_misses
-    msg.corrupt_tiles = list(stats.corrupt)
     return msg
 
 

@@ -1,6 +1,6 @@
-"""PointCloud2 and TileDelta messages whose points stay in the tiles' numpy arrays until rospy
-serialises them: ``serialize`` writes the wire format (the one genpy writes for the plain message)
-straight from the arrays into rospy's buffer.
+"""A PointCloud2 message whose points stay in numpy arrays until rospy serialises it: ``serialize``
+writes the wire format (the one genpy writes for the plain message) straight from the arrays into
+rospy's buffer.
 
 Why: genpy serialises ``uint8[] data`` through ``struct.pack``, which makes a full copy before the
 buffer write makes another, on top of the copy a PointCloud2 holds in ``data``. For a window of tiles
@@ -8,8 +8,8 @@ that is three window-sized copies per publish. Streamed, a message holds no copy
 publishing costs one copy (rospy's send buffer), only while there are subscribers: rospy serialises
 nothing for a topic without connections.
 
-The message objects keep their other fields, but ``data``/``added_clouds`` stay empty: they are for
-publishing, not for reading back in this process.
+The message keeps its other fields, but ``data`` stays empty: it is for publishing, not for reading
+back in this process.
 """
 
 from __future__ import annotations
@@ -23,26 +23,18 @@ import numpy as np
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Header
 
-from grid_puzzle_localization.msg import TileDelta
 from grid_puzzle_localization.ros.msgs.cloud import byte_order_is_big, check_parts, fields_of
-from grid_puzzle_localization.util.iteration import zip_equal
 
 _U32 = struct.Struct("<I")
 _HEADER = struct.Struct("<3I")  # seq, stamp secs, stamp nsecs
 _CLOUD_SHAPE = struct.Struct("<2I")  # height, width
 _FIELD_TAIL = struct.Struct("<IBI")  # offset, datatype, count
 _CLOUD_LAYOUT = struct.Struct("<B2I")  # is_bigendian, point_step, row_step
-_DELTA_HEAD = struct.Struct("<IBd")  # revision, reset, grid_size
-_BOUNDS = struct.Struct("<4q")
 
 
 def _string(text: str) -> bytes:
     raw = text.encode("utf-8")
     return _U32.pack(len(raw)) + raw
-
-
-def _strings(texts: Sequence[str]) -> bytes:
-    return _U32.pack(len(texts)) + b"".join(_string(t) for t in texts)
 
 
 def _header(header: Header) -> bytes:
@@ -111,37 +103,3 @@ class StreamedCloud(PointCloud2):
         prefix = _cloud_prefix(_header(self.header), self._dtype, sum(len(p) for p in parts))
         _reserve(buff, len(prefix) + sum(p.nbytes for p in parts) + 1)
         _write_cloud(buff, prefix, parts, self.is_dense)
-
-
-class StreamedTileDelta(TileDelta):
-    """A TileDelta whose added clouds are written from ``added_points`` (one array per id in
-    ``added_ids``, each becoming an unorganised PointCloud2 with the delta's frame and stamp)."""
-
-    def __init__(self, added_points: Sequence[np.ndarray], clouds_dense: bool, **fields):
-        super().__init__(**fields)
-        self._added_points = list(added_points)
-        self._clouds_dense = clouds_dense
-        if len(self._added_points) != len(self.added_ids):
-            raise ValueError(f"{len(self.added_ids)} added ids but {len(self._added_points)} point arrays")
-
-    def serialize(self, buff) -> None:
-        cloud_header = _header(Header(frame_id=self.header.frame_id, stamp=self.header.stamp))
-        prefixes = []
-        for points in self._added_points:
-            check_parts([points], points.dtype)
-            prefixes.append(_cloud_prefix(cloud_header, points.dtype, len(points)))
-        head = b"".join(
-            [
-                _header(self.header),
-                _DELTA_HEAD.pack(self.revision, self.reset, self.grid_size),
-                _strings(self.added_ids),
-                _U32.pack(len(prefixes)),
-            ]
-        )
-        tail = _strings(self.removed_ids) + _BOUNDS.pack(self.i_min, self.i_max, self.j_min, self.j_max)
-        data = sum(len(p) + a.nbytes + 1 for p, a in zip_equal(prefixes, self._added_points))
-        _reserve(buff, len(head) + data + len(tail))
-        buff.write(head)
-        for prefix, points in zip_equal(prefixes, self._added_points):
-            _write_cloud(buff, prefix, [points], self._clouds_dense)
-        buff.write(tail)

@@ -2,9 +2,14 @@
 
 Subscribes to ``odom`` (nav_msgs/Odometry; then also to ``initialpose``, which seeds the first window
 before the localizer has a map) or ``pose`` (PoseWithCovarianceStamped), all in the map frame.
-Callbacks only store the latest pose; a worker thread recomputes the window (provider/window.py), updates the
-tile store (provider/tile_store.py) and publishes ``tile_delta`` (TileDelta) and the latched ``~status``, and
-tells the map_cloud publisher (map_cloud_publisher.py, a thread of its own) that the window changed.
+Callbacks only store the latest pose; a worker thread recomputes the window (provider/window.py), finds the
+tiles that enter and leave it and those likely to enter next (provider/tile_references.py) and publishes them
+by reference on ``tile_delta`` (TileDelta: tile names and their directory; the localizer reads the files) and
+the latched ``~status``. The node holds no point data. When ``publish_map_cloud`` is set it also tells the
+map_cloud publisher (map_cloud_publisher.py, a thread of its own) that the window changed; that thread reads
+the window's files only while ``map_cloud`` has subscribers.
+A tile directory rewritten under the running node (a new index revision) is reopened and the whole window
+sent again as a reset delta.
 Delta protocol: every broadcast delta increments ``revision`` by one; a new
 subscriber first receives a ``reset`` delta of the whole window carrying the current revision; the
 service ``~resend`` (std_srvs/Trigger) broadcasts a reset delta so a subscriber that saw a revision gap
@@ -13,6 +18,7 @@ can recover.
 
 from __future__ import annotations
 
+import os
 import sys
 import threading
 import time
@@ -25,12 +31,12 @@ from std_srvs.srv import Trigger, TriggerResponse
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.msg import ProviderStatus, TileDelta
 from grid_puzzle_localization.provider.config import ProviderConfig, load_config
-from grid_puzzle_localization.provider.tile_store import StoreDelta, TileStore
+from grid_puzzle_localization.provider.tile_references import TileReferences
 from grid_puzzle_localization.provider.window import PoseSample, Window, WindowTracker
 from grid_puzzle_localization.ros.msgs.map_cloud_publisher import MapCloudPublisher
 from grid_puzzle_localization.ros.msgs.provider import pose_sample, provider_status, stamped, tile_delta
 from grid_puzzle_localization.tiles.directory import open_tile_directory
-from grid_puzzle_localization.util.malloc_tuning import limit_arenas, pin_mmap_threshold, trim_heap
+from grid_puzzle_localization.util.malloc_tuning import limit_arenas, pin_mmap_threshold
 
 WARN_PERIOD = 5.0  # [s] throttle of repeated warnings (off the map, wrong frame)
 
@@ -48,20 +54,20 @@ class MapProviderNode:
     def __init__(self, config: ProviderConfig) -> None:
         self.config = config.checked()
         tiles = self.config.tiles
-        self.directory = open_tile_directory(tiles.dir, tiles.grid_size or None)
-        self.s = self.directory.grid_size
-        if self.directory.unparsable:
+        directory = open_tile_directory(os.path.abspath(tiles.dir), tiles.grid_size or None)
+        self.s = directory.grid_size
+        if directory.unparsable:
             rospy.logwarn(
                 "%s: %d .pcd files are not tiles of side %g m and are ignored: %s",
                 tiles.dir,
-                len(self.directory.unparsable),
+                len(directory.unparsable),
                 self.s,
-                ", ".join(self.directory.unparsable[:10]),
+                ", ".join(directory.unparsable[:10]),
             )
         self.tracker = WindowTracker(self.config.window, self.s)
-        self.store = TileStore(self.directory, tiles.cache_mb, xyz_only=tiles.xyz_only)
+        self.tiles = TileReferences(directory)
         self.frame = self.config.map_frame
-        # Serialises store updates and every publish on tile_delta, so a reset sent to a new subscriber
+        # Serialises tile set updates and every publish on tile_delta, so a reset sent to a new subscriber
         # (from rospy's connection thread) or by ~resend is consistent with the delta stream.
         self._lock = threading.Lock()
         self._revision = 0
@@ -74,7 +80,7 @@ class MapProviderNode:
             "tile_delta", TileDelta, queue_size=50, subscriber_listener=ResetOnSubscribe(self)
         )
         self.map_cloud = (
-            MapCloudPublisher(self.store, self.frame, self.config.map_cloud_period)
+            MapCloudPublisher(self._window_paths, self.frame, self.config.map_cloud_period)
             if self.config.publish_map_cloud
             else None
         )
@@ -91,10 +97,10 @@ class MapProviderNode:
         self._worker.start()
         rospy.loginfo(
             "grid_puzzle_map_provider: %d tiles of %g m in %s (%s), n=%d k=%d, update distance %g m, listening on %s",
-            len(self.directory.keys),
+            len(directory.keys),
             self.s,
             tiles.dir,
-            self.directory.source,
+            directory.source,
             self.tracker.config.n,
             self.tracker.config.k,
             self.tracker.update_distance,
@@ -136,44 +142,74 @@ class MapProviderNode:
                 if self._latest is None:
                     self._pose_ready.wait(0.5)
                 pose, self._latest = self._latest, None
+            self._follow_directory()
             if pose is None:
                 continue
             start = time.perf_counter()
             window = self.tracker.update(pose)
             if window is not None:
                 self._serve(pose, window, start)
-        self.store.close()
+
+    def _follow_directory(self) -> None:
+        """Sends the whole window again when the tile directory was rewritten (new index revision)."""
+        try:
+            with self._lock:
+                changed = self.tiles.refresh()
+        except (UserError, OSError) as err:
+            rospy.logerr_throttle(WARN_PERIOD, "tile directory unusable, keeping the window as it is: %s", err)
+            return
+        if changed:
+            rospy.logwarn(
+                "tile directory %s changed (index revision %s): sending the whole window again",
+                self.tiles.directory.path,
+                self.tiles.revision,
+            )
+            self.send_reset(self.delta_pub.publish, increment=True)
+            if self.map_cloud is not None:
+                self.map_cloud.changed(rospy.Time.now())
 
     def _serve(self, pose: PoseSample, window: Window, start: float) -> None:
-        """Updates the store and publishes; ``start``: perf_counter() when the update began."""
+        """Publishes the change of the window; ``start``: perf_counter() when the update began."""
         stamp = rospy.Time.from_sec(pose.t) if pose.t > 0.0 else rospy.Time.now()
         with self._lock:
-            delta = self.store.update(window, self.tracker.predicted_windows())
+            delta = self.tiles.update(window, self.tracker.predicted_windows())
             first = self._window is None
             changed = first or delta.added or delta.removed or window.bounds != self._window.bounds
             self._window = window
+            msg = self._delta_msg(stamp, first, delta.added, delta.removed, delta.prefetch)
             if changed:
                 self._revision += 1
-                self.delta_pub.publish(
-                    tile_delta(
-                        stamped(self.frame, stamp), self._revision, first, self.s, window, delta.added, delta.removed
-                    )
-                )
-        self._report(pose, window, delta)
+                msg.revision = self._revision
+                self.delta_pub.publish(msg)
+            loaded = len(self.tiles.loaded())
+        self._report(pose, window, loaded)
         if self.map_cloud is not None and (first or delta.added or delta.removed):
             self.map_cloud.changed(stamp)
-        trim_heap()  # tiles evicted from the cache and message buffers leave holes in the heap
         update_ms = (time.perf_counter() - start) * 1e3
-        self.status_pub.publish(
-            provider_status(stamped(self.frame, stamp), window, self.store.stats(), delta.load_ms, update_ms)
+        self.status_pub.publish(provider_status(stamped(self.frame, stamp), window, msg, loaded, update_ms))
+
+    def _delta_msg(self, stamp, reset: bool, added, removed, prefetch):
+        return tile_delta(
+            stamped(self.frame, stamp),
+            self._revision,
+            reset,
+            self.s,
+            self._window,
+            str(self.tiles.directory.path),
+            self.tiles.revision,
+            added,
+            removed,
+            prefetch,
         )
 
-    def _report(self, pose: PoseSample, window: Window, delta: StoreDelta) -> None:
-        for path, reason in delta.newly_corrupt:
-            rospy.logerr("skipping corrupt tile %s: %s", path, reason)
-        off_map = len(self.directory.existing_in(window)) == 0
+    def _window_paths(self) -> list:
+        with self._lock:
+            return self.tiles.paths()
+
+    def _report(self, pose: PoseSample, window: Window, loaded: int) -> None:
+        off_map = loaded == 0
         if off_map:
-            i0, i1, j0, j1 = self.directory.bounds
+            i0, i1, j0, j1 = self.tiles.directory.bounds
             rospy.logwarn_throttle(
                 WARN_PERIOD,
                 "pose (%.1f, %.1f) m is off the map: no tile in window i %d..%d, j %d..%d (the map spans"
@@ -187,7 +223,7 @@ class MapProviderNode:
                 (j1 + 1) * self.s,
             )
         elif self._off_map:
-            rospy.loginfo("pose (%.1f, %.1f) m is back on the map: %d tiles loaded", pose.x, pose.y, len(delta.added))
+            rospy.loginfo("pose (%.1f, %.1f) m is back on the map: %d tiles in the window", pose.x, pose.y, loaded)
         self._off_map = off_map
 
     def send_reset(self, publish, increment: bool) -> int | None:
@@ -199,13 +235,14 @@ class MapProviderNode:
                 return None
             if increment:
                 self._revision += 1
-            header = stamped(self.frame)
-            publish(tile_delta(header, self._revision, True, self.s, self._window, self.store.loaded(), []))
+            # Changes nothing, except after a refresh, which emptied the set: then it loads the new directory's.
+            prefetch = self.tiles.update(self._window, self.tracker.predicted_windows()).prefetch
+            publish(self._delta_msg(rospy.Time.now(), True, self.tiles.loaded(), [], prefetch))
             return self._revision
 
 
 def main() -> None:
-    pin_mmap_threshold()
+    pin_mmap_threshold()  # map_cloud's tile buffers go back to the system once sent
     limit_arenas(1)  # before rospy starts its threads
     rospy.init_node("grid_puzzle_map_provider")
     try:

@@ -1,0 +1,93 @@
+"""The tiles of the window by reference: which tile files enter and leave the window, and which are
+likely to enter next, without reading a single point (the localizer reads the files itself).
+
+``TileReferences.update(window, ahead)`` returns the keys that entered and left since the last update
+and the prefetch list (tiles of the ``ahead`` windows, most likely first, that are not in the window).
+``refresh()`` notices a tile directory rewritten under the running node (a new index revision) and
+reopens it; the caller then sends the whole window again as a reset. Not thread-safe (the provider
+serialises its updates).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.provider.window import Window
+from grid_puzzle_localization.tiles.directory import TileDirectory, decode_key, open_tile_directory
+from grid_puzzle_localization.tiling.index import INDEX_FILE
+
+Key = tuple[int, int]
+PREFETCH_MAX_TILES = 256  # bound of one prefetch list: the localizer's byte budget bounds what it reads
+
+
+def index_revision(path: Path) -> str:
+    """Identity of a tile directory's contents: of its index file when there is one (the tiler replaces
+    it by rename, so a rewrite changes inode, time or size), else of the directory itself (adding or
+    removing a tile file changes its modification time)."""
+    index = path / INDEX_FILE
+    try:
+        st = os.stat(index)
+        return f"index:{st.st_ino}:{st.st_mtime_ns}:{st.st_size}"
+    except FileNotFoundError:
+        st = os.stat(path)
+        return f"scan:{st.st_ino}:{st.st_mtime_ns}"
+
+
+@dataclass(frozen=True)
+class ReferenceDelta:
+    added: list[Key]
+    removed: list[Key]
+    prefetch: list[Key]  # most likely first
+
+
+class TileReferences:
+    def __init__(self, directory: TileDirectory) -> None:
+        self.directory = directory
+        self.revision = index_revision(directory.path)
+        self._loaded: set[int] = set()  # codes (tiles.directory.encode_keys) of the window's tiles
+
+    def update(self, window: Window, ahead: Sequence[Window] = ()) -> ReferenceDelta:
+        wanted_codes = self.directory.codes_in(window)
+        wanted = set(wanted_codes.tolist())
+        removed = sorted(self._loaded - wanted)
+        added = [c for c in wanted_codes.tolist() if c not in self._loaded]
+        self._loaded = wanted
+        prefetch: list[int] = []
+        if ahead:
+            codes = np.concatenate([self.directory.codes_in(w) for w in ahead])
+            _, first = np.unique(codes, return_index=True)
+            codes = codes[np.sort(first)]  # unique, most likely window first
+            prefetch = codes[~np.isin(codes, wanted_codes)][:PREFETCH_MAX_TILES].tolist()
+        return ReferenceDelta(
+            [decode_key(c) for c in added], [decode_key(c) for c in removed], [decode_key(c) for c in prefetch]
+        )
+
+    def loaded(self) -> list[Key]:
+        return sorted(decode_key(c) for c in self._loaded)
+
+    def paths(self) -> list[Path]:
+        """Files of the window's tiles (map_cloud reads them when someone subscribes)."""
+        return [self.directory.tile_path(k) for k in self.loaded()]
+
+    def refresh(self) -> bool:
+        """Reopens the directory when its index revision changed; True then (the window must be sent
+        again as a reset). Raises UserError when the directory became unusable (the old one is kept)."""
+        try:
+            revision = index_revision(self.directory.path)
+        except OSError as err:
+            raise UserError(
+                f"tile directory {self.directory.path} cannot be read any more ({err.strerror});"
+                " restore it or restart the provider with another tiles/dir"
+            ) from None
+        if revision == self.revision:
+            return False
+        self.directory = open_tile_directory(self.directory.path, self.directory.grid_size)
+        self.revision = revision
+        self._loaded = set()
+        return True
