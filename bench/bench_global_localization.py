@@ -3,9 +3,9 @@
 ``global_localize`` program) against known poses. Prints one JSON line per data set and search mode.
 
 Data sets:
-- sim_courtyard, sim_urban: a world of `gpm simulate` (its prior map, built from the mapping run with its
-  simulated drift) and single sweeps simulated at random poses of the localization route, base frame = lidar
-  frame, truth = the simulator's pose;
+- sim_courtyard, sim_urban: a world of `gpm simulate` at --scale, its prior map built from sweeps every
+  --keyframe-spacing metres of the mapping run (with the simulated drift of its pose estimate), and single sweeps
+  simulated at random poses of the localization route; base frame = lidar frame, truth = the simulator's pose;
 - mulran_riverside02: real Ouster OS1-64 keyframes (scans 50-215, the stretch whose FAST-LIO2 odometry is
   locally consistent to about 0.1 m; its poses are the reference, not ground truth). The map is built from the
   even-numbered scans, the odd-numbered ones are localized;
@@ -148,33 +148,46 @@ def quick_dataset(directory: Path, trials: int, offset: float, rng) -> tuple[Pat
     return map_pcd, out
 
 
-def sim_dataset(world_name: str, scale: float, directory: Path, trials: int, offset: float, rng):
+def sim_dataset(world_name: str, scale: float, spacing: float, directory: Path, trials: int, offset: float, rng):
+    """The prior map: sweeps every ``spacing`` [m] of the scenario's mapping run, placed (and deskewed) with its
+    drifted pose estimate, voxel-filtered like `gpm simulate`'s map (whose every-sweep map takes too long here)."""
+    from grid_puzzle_localization.pcd import PcdStreamWriter
     from grid_puzzle_localization.sim.lidar import Mount, SweepSimulator
+    from grid_puzzle_localization.sim.mapping import MAP_DTYPE, VoxelMap, drifted, to_map
     from grid_puzzle_localization.sim.raycast import RayCaster
-    from grid_puzzle_localization.sim.scenario import MOUNTS, ScenarioConfig, _rng, _write_map
+    from grid_puzzle_localization.sim.scenario import MOUNTS, ScenarioConfig, _rng
     from grid_puzzle_localization.sim.sensors import get_sensor
-    from grid_puzzle_localization.sim.trajectory import Trajectory, localization_trajectory, mapping_trajectory
+    from grid_puzzle_localization.sim.trajectory import RATE, Trajectory, localization_trajectory, mapping_trajectory
     from grid_puzzle_localization.sim.worlds import make_world
 
     cfg = ScenarioConfig(world=world_name, scale=scale).resolved()
     world = make_world(cfg.world, cfg.seed, cfg.scale)
     loc = localization_trajectory(world, cfg.scale, _rng(cfg.seed, 1))
     mapping = mapping_trajectory(world, loc, _rng(cfg.seed, 2))
+    estimate = drifted(mapping, cfg.drift, _rng(cfg.seed, 3))
     mount = Mount(np.array(MOUNTS[cfg.world]), np.eye(3))
+    base_t_lidar = np.eye(4)
+    base_t_lidar[:3, :3], base_t_lidar[:3, 3] = mount.rotation, mount.translation
+    travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(mapping.position[:, :2], axis=0), axis=1))])
+    keyframes = np.searchsorted(travelled, np.arange(0.0, travelled[-1], spacing)) / RATE
     map_pcd = directory / f"{world_name}_map.pcd"
     out = []
     with RayCaster(world.mesh, threads=2) as caster:
         sim = SweepSimulator(world.mesh, caster, get_sensor(cfg.sensor), mount)
-        _write_map(map_pcd, cfg, sim, mapping, mount, False)
+        voxels = VoxelMap(cfg.map_leaf)
+        for k, t in enumerate(keyframes):
+            cloud = sim.simulate(mapping, float(t), sim.sensor.sweep(k), rng)
+            voxels.add(to_map(estimate, mount, float(t), cloud), cloud["intensity"])
+        with PcdStreamWriter(map_pcd, MAP_DTYPE) as writer:
+            for chunk in voxels.chunks():
+                writer.append(chunk)
         for k in range(trials):
             pos, quat = loc.interpolate(np.array([rng.uniform(0.0, loc.duration)]))
             still = Trajectory(np.repeat(pos, 2, axis=0), np.repeat(quat, 2, axis=0), loc.route)
             cloud = sim.simulate(still, 0.0, sim.sensor.sweep(k), rng)
             base = np.eye(4)
-            base[:3, :3] = Trajectory(pos, quat, loc.route).frames(np.zeros(1))[1][:, :, 0]
-            base[:3, 3] = pos[0]
-            lidar = base @ np.block([[mount.rotation, mount.translation[:, None]], [np.zeros((1, 3)), np.ones((1, 1))]])
-            out.append(make_trial(directory, f"{world_name}_{k}", xyz_array(cloud), lidar, offset, rng))
+            base[:3, :3], base[:3, 3] = still.frames(np.zeros(1))[1][:, :, 0], pos[0]
+            out.append(make_trial(directory, f"{world_name}_{k}", xyz_array(cloud), base @ base_t_lidar, offset, rng))
     return map_pcd, out
 
 
@@ -216,7 +229,8 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true", help="a tiny synthetic street only (a few seconds)")
     parser.add_argument("--trials", type=int, default=100, help="trials per data set (default 100)")
     parser.add_argument("--datasets", default="sim_courtyard,sim_urban,mulran_riverside02", help="comma-separated")
-    parser.add_argument("--scale", type=float, default=0.4, help="simulated world scale (default 0.4)")
+    parser.add_argument("--scale", type=float, default=0.25, help="simulated world scale (default 0.25)")
+    parser.add_argument("--keyframe-spacing", type=float, default=2.0, help="simulated map: a sweep every ... [m]")
     parser.add_argument("--size", type=float, default=40.0, help="search square [m] (default 40)")
     parser.add_argument("--large-size", type=float, default=100.0, help="the larger search square [m] (default 100)")
     parser.add_argument("--offset", type=float, default=15.0, help="largest distance of the centre from the truth [m]")
@@ -240,7 +254,9 @@ def main() -> int:
             if dataset == "quick":
                 map_pcd, data = quick_dataset(directory, trials, args.offset, rng)
             elif dataset.startswith("sim_"):
-                map_pcd, data = sim_dataset(dataset[4:], args.scale, directory, trials, args.offset, rng)
+                map_pcd, data = sim_dataset(
+                    dataset[4:], args.scale, args.keyframe_spacing, directory, trials, args.offset, rng
+                )
             elif dataset == "mulran_riverside02":
                 if not MULRAN.is_dir():
                     print(json.dumps({"dataset": dataset, "skipped": f"{MULRAN} is absent (no /work/shared)"}))

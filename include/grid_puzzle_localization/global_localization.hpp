@@ -65,9 +65,14 @@ struct GlobalLocalizationConfig {
   double same_pose_distance = 0.5;
   /// [rad] ... and turned less than this are the same answer.
   double same_pose_yaw = 0.035;
-  /// NDT used to refine the winner (its resolution is also the voxel size of the target built from the map
-  /// points when no target is given to setMap).
-  NdtConfig ndt;
+  /// NDT used to refine the candidates (its resolution is also the voxel size of the target built from the map
+  /// points when no target is given to setMap). The package's NDT defaults, but iterated down to 1 mm steps: the
+  /// refined pose is the final answer, not the first guess of a tracker.
+  NdtConfig ndt = [] {
+    NdtConfig c;
+    c.transformation_epsilon = 0.001;
+    return c;
+  }();
   /// The refined pose must have at least this fraction of scan points within the NDT inlier gate, in [0, 1].
   double min_inlier_fraction = 0.5;
   /// [m] the refinement may move the search's answer at most this far (else it is refused).

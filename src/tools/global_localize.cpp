@@ -81,12 +81,16 @@ void set(gpl::GlobalLocalizationConfig* c, const std::string& assignment) {
                                                    {"same_pose_distance", &c->same_pose_distance},
                                                    {"same_pose_yaw", &c->same_pose_yaw},
                                                    {"min_inlier_fraction", &c->min_inlier_fraction},
-                                                   {"max_refinement_shift", &c->max_refinement_shift}};
+                                                   {"max_refinement_shift", &c->max_refinement_shift},
+                                                   {"ndt.resolution", &c->ndt.resolution},
+                                                   {"ndt.transformation_epsilon", &c->ndt.transformation_epsilon},
+                                                   {"ndt.step_size", &c->ndt.step_size}};
   const std::pair<const char*, int*> integers[] = {{"max_scan_points", &c->max_scan_points},
                                                    {"min_scan_points", &c->min_scan_points},
                                                    {"levels", &c->levels},
                                                    {"initial_descents", &c->initial_descents},
-                                                   {"refine_candidates", &c->refine_candidates}};
+                                                   {"refine_candidates", &c->refine_candidates},
+                                                   {"ndt.max_iterations", &c->ndt.max_iterations}};
   for (const auto& [key, field] : reals)
     if (eq != std::string::npos && name == key) {
       *field = v;
