@@ -50,8 +50,9 @@ struct GlobalLocalizationConfig {
   /// Fraction of the scan's structure points on the map's structure (likelihood-weighted) that a pose needs
   /// to be considered, in [0, 1].
   double min_score = 0.3;
-  /// Answers whose runner-up scores at least this fraction of the winner's score are refused as ambiguous,
-  /// in (0, 1]. Also the pruning ratio: only candidates within this fraction of the best are explored.
+  /// The search explores the candidates scoring within this fraction of the best, in (0, 1]; the distinct ones among
+  /// them are refined, and an answer whose runner-up's NDT fit is at least this fraction of its own is refused as
+  /// ambiguous.
   double max_runner_up_ratio = 0.9;
   /// [m] a runner-up must be at least this far from the winner in position ...
   double runner_up_distance = 2.0;
@@ -97,14 +98,20 @@ struct GlobalSearchRequest {
 struct GlobalLocalizationResult {
   bool found = false;  ///< a pose was found and accepted (unambiguous, refined, above min_score)
   Eigen::Isometry3d map_T_base = Eigen::Isometry3d::Identity();  ///< the refined pose (the best guess when refused)
-  /// Search score of the winner: likelihood-weighted fraction of the scan's structure points on map structure,
-  /// in [0, 1].
+  /// Search score of the answer: likelihood-weighted fraction of the scan's structure points on map structure of
+  /// their height band, in [0, 1].
   double score = 0.0;
-  /// Search score of the best candidate that is another answer than the winner: it refines to another pose, or it
-  /// was not refined (beyond refine_candidates). Without one, max_runner_up_ratio * score: an upper bound, since
-  /// the search proved that no other place scores more.
+  /// Search score of the runner-up: the best other answer (a distinct candidate that refines to another pose).
+  /// Without one, max_runner_up_ratio times the best search score: an upper bound, since the search proved that no
+  /// other place scores more.
   double runner_up_score = 0.0;
-  /// 1 - runner_up_score / score, in [0, 1]; 0 = two places explain the scan equally well.
+  /// NDT fit of the answer (transformation probability: -NDT score per scan point, higher is better). Answers are
+  /// chosen by it.
+  double fit = 0.0;
+  /// NDT fit of the runner-up; without one, max_runner_up_ratio * fit (an upper bound, see runner_up_score).
+  double runner_up_fit = 0.0;
+  /// 1 - runner_up_fit / fit, in [0, 1]; 0 = two places explain the scan equally well. Answers with a confidence
+  /// below 1 - max_runner_up_ratio are refused.
   double confidence = 0.0;
   std::string reason;                    ///< empty when found, else why it was refused and what to do
   double seconds = 0.0;                  ///< wall time of localize()

@@ -182,10 +182,10 @@ std::string json(const gpl::GlobalLocalizationResult& r, double cpu_seconds) {
   for (const char c : r.reason) reason += (c == '"' || c == '\\') ? std::string("\\") + c : std::string(1, c);
   js << "{\"found\": " << (r.found ? "true" : "false") << ", \"x\": " << t.x() << ", \"y\": " << t.y()
      << ", \"z\": " << t.z() << ", \"roll\": " << roll << ", \"pitch\": " << pitch << ", \"yaw\": " << yaw
-     << ", \"score\": " << r.score << ", \"runner_up_score\": " << r.runner_up_score
-     << ", \"confidence\": " << r.confidence << ", \"seconds\": " << r.seconds
-     << ", \"candidates_evaluated\": " << r.candidates_evaluated << ", \"scan_points_used\": " << r.scan_points_used
-     << ", \"cpu_seconds\": " << cpu_seconds
+     << ", \"score\": " << r.score << ", \"runner_up_score\": " << r.runner_up_score << ", \"fit\": " << r.fit
+     << ", \"runner_up_fit\": " << r.runner_up_fit << ", \"confidence\": " << r.confidence
+     << ", \"seconds\": " << r.seconds << ", \"candidates_evaluated\": " << r.candidates_evaluated
+     << ", \"scan_points_used\": " << r.scan_points_used << ", \"cpu_seconds\": " << cpu_seconds
      << ", \"ndt_transformation_probability\": " << r.refinement.transformation_probability
      << ", \"ndt_inlier_fraction\": " << r.refinement.inlier_fraction << ", \"ndt_status\": \""
      << gpl::toString(r.refinement.status) << "\", \"reason\": \"" << reason << "\"}";
