@@ -24,9 +24,11 @@ import argparse
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import tempfile
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -118,6 +120,11 @@ def scored(answers: list[dict], trials: list[Trial]) -> list[dict]:
     return out
 
 
+def refusal_kind(reason: str) -> str:
+    """A refusal's reason without its figures, so that refusals of one kind count together."""
+    return re.sub(r"\d[\d.e+-]*", "#", reason.split(":")[0].split(" (")[0])
+
+
 def summary(dataset: str, mode: str, size: float, threads: int, rows: list[dict]) -> dict:
     accepted = [r for r in rows if r["found"]]
     return {
@@ -137,7 +144,7 @@ def summary(dataset: str, mode: str, size: float, threads: int, rows: list[dict]
         "median_cpu_seconds": percentile([r["cpu_seconds"] for r in rows], 50),
         "p95_cpu_seconds": percentile([r["cpu_seconds"] for r in rows], 95),
         "median_candidates": percentile([r["candidates_evaluated"] for r in rows], 50),
-        "refusal_reasons": sorted({r["reason"].split(":")[0] for r in rows if not r["found"]}),
+        "refusals": dict(Counter(refusal_kind(r["reason"]) for r in rows if not r["found"])),
     }
 
 
