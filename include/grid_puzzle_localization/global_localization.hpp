@@ -50,8 +50,9 @@ struct GlobalLocalizationConfig {
   /// Fraction of the scan's structure points on the map's structure (likelihood-weighted) that a pose needs
   /// to be considered, in [0, 1].
   double min_score = 0.3;
-  /// Answers whose runner-up scores at least this fraction of the winner's score are refused as ambiguous,
-  /// in (0, 1]. Also the pruning ratio: only candidates within this fraction of the best are explored.
+  /// The search explores the candidates scoring within this fraction of the best, in (0, 1]; the distinct ones among
+  /// them are refined, and an answer whose runner-up's NDT fit is at least this fraction of its own is refused as
+  /// ambiguous.
   double max_runner_up_ratio = 0.9;
   /// [m] a runner-up must be at least this far from the winner in position ...
   double runner_up_distance = 2.0;
@@ -65,9 +66,14 @@ struct GlobalLocalizationConfig {
   double same_pose_distance = 0.5;
   /// [rad] ... and turned less than this are the same answer.
   double same_pose_yaw = 0.035;
-  /// NDT used to refine the winner (its resolution is also the voxel size of the target built from the map
-  /// points when no target is given to setMap).
-  NdtConfig ndt;
+  /// NDT used to refine the candidates (its resolution is also the voxel size of the target built from the map
+  /// points when no target is given to setMap). The package's NDT defaults, but iterated down to 1 mm steps: the
+  /// refined pose is the final answer, not the first guess of a tracker.
+  NdtConfig ndt = [] {
+    NdtConfig c;
+    c.transformation_epsilon = 0.001;
+    return c;
+  }();
   /// The refined pose must have at least this fraction of scan points within the NDT inlier gate, in [0, 1].
   double min_inlier_fraction = 0.5;
   /// [m] the refinement may move the search's answer at most this far (else it is refused).
@@ -92,14 +98,20 @@ struct GlobalSearchRequest {
 struct GlobalLocalizationResult {
   bool found = false;  ///< a pose was found and accepted (unambiguous, refined, above min_score)
   Eigen::Isometry3d map_T_base = Eigen::Isometry3d::Identity();  ///< the refined pose (the best guess when refused)
-  /// Search score of the winner: likelihood-weighted fraction of the scan's structure points on map structure,
-  /// in [0, 1].
+  /// Search score of the answer: likelihood-weighted fraction of the scan's structure points on map structure of
+  /// their height band, in [0, 1].
   double score = 0.0;
-  /// Search score of the best candidate that is another answer than the winner: it refines to another pose, or it
-  /// was not refined (beyond refine_candidates). Without one, max_runner_up_ratio * score: an upper bound, since
-  /// the search proved that no other place scores more.
+  /// Search score of the runner-up: the best other answer (a distinct candidate that refines to another pose).
+  /// Without one, max_runner_up_ratio times the best search score: an upper bound, since the search proved that no
+  /// other place scores more.
   double runner_up_score = 0.0;
-  /// 1 - runner_up_score / score, in [0, 1]; 0 = two places explain the scan equally well.
+  /// NDT fit of the answer (transformation probability: -NDT score per scan point, higher is better). Answers are
+  /// chosen by it.
+  double fit = 0.0;
+  /// NDT fit of the runner-up; without one, max_runner_up_ratio * fit (an upper bound, see runner_up_score).
+  double runner_up_fit = 0.0;
+  /// 1 - runner_up_fit / fit, in [0, 1]; 0 = two places explain the scan equally well. Answers with a confidence
+  /// below 1 - max_runner_up_ratio are refused.
   double confidence = 0.0;
   std::string reason;                    ///< empty when found, else why it was refused and what to do
   double seconds = 0.0;                  ///< wall time of localize()
@@ -125,7 +137,8 @@ class GlobalLocalizer {
   /// `map_points` (which then need >= ndt.min_points_per_voxel points per voxel, i.e. not voxel means).
   void setMap(const PointCloud& map_points, std::shared_ptr<const VoxelMap> ndt_target = nullptr);
   bool hasMap() const;
-  /// [m] x-y bounding box of the map's points (both zero without a map); lets a caller search the whole map.
+  /// [m] x-y bounding box of the map's structure points (both zero without a map); lets a caller search the whole
+  /// map.
   Eigen::AlignedBox2d mapBounds() const;
 
   /// Searches for map_T_base given `scan` in the base frame [m]. `up_in_base` is the direction opposite to gravity

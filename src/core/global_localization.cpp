@@ -310,7 +310,7 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
     return refused(result, msg.str(), start);
   }
   result.score = static_cast<double>(outcome.leaves.front().score) / full;
-  result.runner_up_score = cfg.max_runner_up_ratio * result.score;
+  result.runner_up_score = cfg.max_runner_up_ratio * result.score;  // an upper bound until a runner-up is refined
 
   // Distinct candidates: the best leaf, then each next leaf far (in position or yaw) from all kept ones.
   auto x_of = [&](const BbsNode& n) { return x_lo + n.x * r; };
@@ -327,50 +327,71 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
     if (distinct.size() > static_cast<std::size_t>(cfg.refine_candidates)) break;
   }
 
-  // Refine with NDT, z from the map's ground under the candidate and the scan's under the sensor, roll and pitch from
-  // gravity. A candidate that refines to the winner's pose is the slope of the same peak; the first one that does
-  // not (or that is not refined) is the runner-up.
+  // Refine each distinct candidate with NDT: z from the map's ground under it and the scan's under the sensor, roll
+  // and pitch from gravity. Candidates that refine to one pose are one answer (the slope of one peak); answers compete
+  // by their NDT fit, the scan's 3D agreement with the map, which the 2D search score only approximates.
   const NdtAligner aligner(cfg.ndt);
   const PointCloud source = voxelDownsample(finite, r);
-  auto refine = [&](const BbsNode& n, Eigen::Isometry3d* guess, NdtResult* ndt) {
-    double ground_z = 0.0;
-    if (!map_->ground.heightNear(x_of(n), y_of(n), kGroundRadius, &ground_z)) return false;
-    guess->setIdentity();
-    guess->translation() = Eigen::Vector3d(x_of(n), y_of(n), ground_z - scan_ground_z);
-    guess->linear() = Eigen::AngleAxisd(yaw_of(n), Eigen::Vector3d::UnitZ()).toRotationMatrix() * level;
-    *ndt = aligner.align(*map_->ndt_target, source, guess->cast<float>().matrix());
-    return ndt->status == NdtResultStatus::OK || ndt->status == NdtResultStatus::MAX_ITERATIONS;
+  struct Answer {
+    std::size_t candidate;
+    Eigen::Isometry3d guess, pose;
+    NdtResult ndt;
   };
-  Eigen::Isometry3d guess;
-  if (!refine(distinct.front(), &guess, &result.refinement)) {
-    result.map_T_base = guess;
-    return refused(result,
-                   std::string("the NDT refinement of the best candidate failed (") +
-                       toString(result.refinement.status) + ": " + result.refinement.message + ")",
+  std::vector<Answer> answers;
+  const std::size_t refined = std::min(distinct.size(), static_cast<std::size_t>(cfg.refine_candidates));
+  for (std::size_t i = 0; i < refined; ++i) {
+    const BbsNode& n = distinct[i];
+    double ground_z = 0.0;
+    if (!map_->ground.heightNear(x_of(n), y_of(n), kGroundRadius, &ground_z)) continue;
+    Answer a{i, Eigen::Isometry3d::Identity(), Eigen::Isometry3d::Identity(), NdtResult()};
+    a.guess.translation() = Eigen::Vector3d(x_of(n), y_of(n), ground_z - scan_ground_z);
+    a.guess.linear() = Eigen::AngleAxisd(yaw_of(n), Eigen::Vector3d::UnitZ()).toRotationMatrix() * level;
+    a.ndt = aligner.align(*map_->ndt_target, source, a.guess.cast<float>().matrix());
+    if (a.ndt.status != NdtResultStatus::OK && a.ndt.status != NdtResultStatus::MAX_ITERATIONS) continue;
+    a.pose.matrix() = a.ndt.transform.cast<double>();
+    bool same = false;
+    for (const Answer& b : answers) {
+      const Eigen::Isometry3d delta = b.pose.inverse() * a.pose;
+      same = same || (delta.translation().norm() < cfg.same_pose_distance &&
+                      Eigen::AngleAxisd(delta.linear()).angle() < cfg.same_pose_yaw);
+    }
+    if (!same) answers.push_back(a);
+  }
+  if (answers.empty())
+    return refused(result, "the NDT refinement failed for every candidate: the map around them has too few voxels",
                    start);
+  std::stable_sort(answers.begin(), answers.end(), [](const Answer& a, const Answer& b) {
+    return a.ndt.transformation_probability > b.ndt.transformation_probability;
+  });
+  const Answer& best = answers.front();
+  result.map_T_base = best.pose;
+  result.refinement = best.ndt;
+  result.score = static_cast<double>(distinct[best.candidate].score) / full;
+  result.fit = best.ndt.transformation_probability;
+  // Distinct candidates left unrefined could be other answers: count them as equal to the winner.
+  const bool unrefined = distinct.size() > refined;
+  if (answers.size() > 1) {
+    result.runner_up_score = static_cast<double>(distinct[answers[1].candidate].score) / full;
+    result.runner_up_fit = answers[1].ndt.transformation_probability;
+  } else if (unrefined) {
+    result.runner_up_score = static_cast<double>(distinct[refined].score) / full;
+    result.runner_up_fit = result.fit;
+  } else {
+    result.runner_up_fit = cfg.max_runner_up_ratio * result.fit;
   }
-  result.map_T_base.matrix() = result.refinement.transform.cast<double>();
-  bool ambiguous = false;
-  for (std::size_t i = 1; i < distinct.size() && !ambiguous; ++i) {
-    Eigen::Isometry3d other_guess;
-    NdtResult other;
-    const bool same = i <= static_cast<std::size_t>(cfg.refine_candidates) && refine(distinct[i], &other_guess, &other);
-    const Eigen::Isometry3d delta = result.map_T_base.inverse() * Eigen::Isometry3d(other.transform.cast<double>());
-    if (same && delta.translation().norm() < cfg.same_pose_distance &&
-        Eigen::AngleAxisd(delta.linear()).angle() < cfg.same_pose_yaw)
-      continue;
-    ambiguous = true;
-    result.runner_up_score = static_cast<double>(distinct[i].score) / full;
-  }
-  result.confidence = std::clamp(1.0 - result.runner_up_score / result.score, 0.0, 1.0);
+  result.confidence = result.fit > 0.0 ? std::clamp(1.0 - result.runner_up_fit / result.fit, 0.0, 1.0) : 0.0;
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
   std::ostringstream why;
   const NdtResult& ndt = result.refinement;
-  const double shift = (result.map_T_base.translation() - guess.translation()).head<2>().norm();
-  if (ambiguous)
-    why << "ambiguous: another place scores " << result.runner_up_score << " against the best " << result.score
-        << " (max_runner_up_ratio " << cfg.max_runner_up_ratio << "): search a smaller area or give a better centre";
+  const double shift = (best.pose.translation() - best.guess.translation()).head<2>().norm();
+  if (unrefined)
+    why << "ambiguous: more than refine_candidates = " << cfg.refine_candidates << " distinct places score within "
+        << cfg.max_runner_up_ratio << " of the best: search a smaller area or give a better centre";
+  else if (answers.size() > 1 && result.runner_up_fit >= cfg.max_runner_up_ratio * result.fit)
+    why << "ambiguous: another place fits the scan " << result.runner_up_fit << " against the best " << result.fit
+        << " (NDT fit, max_runner_up_ratio " << cfg.max_runner_up_ratio
+        << "): search a smaller area or give a better centre";
   else if (ndt.inlier_fraction < cfg.min_inlier_fraction)
     why << "the refined pose explains only " << ndt.inlier_fraction << " of the scan (min_inlier_fraction "
         << cfg.min_inlier_fraction << ")";

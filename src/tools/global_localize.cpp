@@ -81,12 +81,16 @@ void set(gpl::GlobalLocalizationConfig* c, const std::string& assignment) {
                                                    {"same_pose_distance", &c->same_pose_distance},
                                                    {"same_pose_yaw", &c->same_pose_yaw},
                                                    {"min_inlier_fraction", &c->min_inlier_fraction},
-                                                   {"max_refinement_shift", &c->max_refinement_shift}};
+                                                   {"max_refinement_shift", &c->max_refinement_shift},
+                                                   {"ndt.resolution", &c->ndt.resolution},
+                                                   {"ndt.transformation_epsilon", &c->ndt.transformation_epsilon},
+                                                   {"ndt.step_size", &c->ndt.step_size}};
   const std::pair<const char*, int*> integers[] = {{"max_scan_points", &c->max_scan_points},
                                                    {"min_scan_points", &c->min_scan_points},
                                                    {"levels", &c->levels},
                                                    {"initial_descents", &c->initial_descents},
-                                                   {"refine_candidates", &c->refine_candidates}};
+                                                   {"refine_candidates", &c->refine_candidates},
+                                                   {"ndt.max_iterations", &c->ndt.max_iterations}};
   for (const auto& [key, field] : reals)
     if (eq != std::string::npos && name == key) {
       *field = v;
@@ -178,10 +182,10 @@ std::string json(const gpl::GlobalLocalizationResult& r, double cpu_seconds) {
   for (const char c : r.reason) reason += (c == '"' || c == '\\') ? std::string("\\") + c : std::string(1, c);
   js << "{\"found\": " << (r.found ? "true" : "false") << ", \"x\": " << t.x() << ", \"y\": " << t.y()
      << ", \"z\": " << t.z() << ", \"roll\": " << roll << ", \"pitch\": " << pitch << ", \"yaw\": " << yaw
-     << ", \"score\": " << r.score << ", \"runner_up_score\": " << r.runner_up_score
-     << ", \"confidence\": " << r.confidence << ", \"seconds\": " << r.seconds
-     << ", \"candidates_evaluated\": " << r.candidates_evaluated << ", \"scan_points_used\": " << r.scan_points_used
-     << ", \"cpu_seconds\": " << cpu_seconds
+     << ", \"score\": " << r.score << ", \"runner_up_score\": " << r.runner_up_score << ", \"fit\": " << r.fit
+     << ", \"runner_up_fit\": " << r.runner_up_fit << ", \"confidence\": " << r.confidence
+     << ", \"seconds\": " << r.seconds << ", \"candidates_evaluated\": " << r.candidates_evaluated
+     << ", \"scan_points_used\": " << r.scan_points_used << ", \"cpu_seconds\": " << cpu_seconds
      << ", \"ndt_transformation_probability\": " << r.refinement.transformation_probability
      << ", \"ndt_inlier_fraction\": " << r.refinement.inlier_fraction << ", \"ndt_status\": \""
      << gpl::toString(r.refinement.status) << "\", \"reason\": \"" << reason << "\"}";

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 from fixtures import synthetic_scene as ss
 
+from grid_puzzle_localization.blocks.store import write_block_dir
 from grid_puzzle_localization.cli import main
-from grid_puzzle_localization.pcd import write_pcd, xyz_records
+from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array, xyz_records
 from grid_puzzle_localization.tiling.tiler import TileConfig, tile_map
 
 GRID = 10.0  # [m] tile side
@@ -68,6 +69,21 @@ def test_pcd_map_and_yaw_interval(capsys, street):
     assert code == 0, err
     assert_at(answer, truth)
     assert answer["tiles_loaded"] == 1
+
+
+def test_block_directory_loads_only_the_blocks_overlapping_the_search(capsys, street):
+    root, truth = street
+    points = xyz_array(read_pcd(root / "map.pcd").points)
+    slabs = [points[(points[:, 0] >= x0) & (points[:, 0] < x0 + 30.0)] for x0 in np.arange(-30.0, 110.0, 20.0)]
+    write_block_dir(root / "blocks", ((p, p.mean(axis=0), {}) for p in slabs), "fixed_submaps", {}, len(points))
+    code, answer, err = localize(
+        capsys, "--map", str(root / "blocks"), "--scan", str(root / "scan.pcd"), "--center", "42", "1.5",
+        "--size", "10", "--threads", "2",
+    )  # fmt: skip
+    assert code == 0, err
+    assert_at(answer, truth)
+    # x 37..47 plus the scan's 40 m reach (-3..87) overlaps every slab but the last (x 90..106).
+    assert answer["tiles_loaded"] == len(slabs) - 1
 
 
 def test_errors_name_the_input(capsys, street, tmp_path):
