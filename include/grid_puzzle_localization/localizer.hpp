@@ -33,18 +33,24 @@ struct MatchConfig {
 };
 
 struct ImuConfig {
-  bool use_gyro = true;  ///< use gyro samples for the rotation prediction when they cover the interval
+  bool use_gyro = true;   ///< use gyro samples for the rotation prediction when they cover the interval
   double max_gap = 0.05;  ///< [s] >= 0, samples may end this far short of a scan and still cover it
 
   std::string validate() const;
 };
 
-/// Extra matches tried when the match from the prediction fails the gate (never when it passes): from the
-/// last accepted pose, and from yaw offsets +-k * yaw_step (k = 1..yaw_count) around the prediction when
-/// the rotation is uncertain (no gyro). The best acceptable one by NVTL is kept.
+/// Extra matches tried when the match from the prediction is poor (fails the gate, or its NVTL is below
+/// poor_nvtl_ratio times the last accepted one's), never when it is good: the last accepted pose and, when
+/// the rotation is uncertain (no gyro), yaw offsets +-k * yaw_step (k = 1..yaw_count) around it and around
+/// the prediction. They are screened by the NDT cost (cheap), the best `refine` are aligned, and the best
+/// acceptable one by NVTL is kept; when it is still poor the bounded search runs too.
 struct HypothesesConfig {
-  double yaw_step = 0.26;  ///< [rad] > 0
-  int yaw_count = 2;       ///< >= 0
+  /// [rad] > 0; NDT converges from about 0.05-0.1 rad of yaw error at 1 m voxels (tens of metres of range
+  /// turn the points by metres), so the offsets are that fine and screened rather than all aligned.
+  double yaw_step = 0.05;
+  int yaw_count = 12;            ///< >= 0
+  int refine = 4;                ///< >= 1, alignments run
+  double poor_nvtl_ratio = 0.9;  ///< [0, 1]; 0 = only a match failing the gate is poor
 
   std::string validate() const;
 };
@@ -115,7 +121,7 @@ struct LocalizerOutput {
   int search_candidates = 0;      ///< poses screened by the search on this scan (0: no search)
   bool search_ambiguous = false;  ///< the search found an acceptable pose but refused it as ambiguous
   bool recovered = false;         ///< accepted after lost.max_coast_time without a match
-  NdtResult ndt;                ///< the match (status INVALID_INPUT when no match was tried)
+  NdtResult ndt;                  ///< the match (status INVALID_INPUT when no match was tried)
   PreprocessReport preprocess;
   double align_ms = 0.0;  ///< NDT only
   double scan_ms = 0.0;   ///< whole processScan, including preprocessing and the swap
@@ -156,6 +162,8 @@ class Localizer {
   /// points) and, when an acceptable unambiguous pose is found, makes it the pose to start from at the next
   /// scan. Scan thread only. With no scan or no map yet the result is empty.
   SearchResult globalLocalize(const SearchRegion& region);
+  /// The x y z extent of the current target's Gaussians (voxel means); empty without a map.
+  std::optional<Eigen::AlignedBox3d> mapBounds() const;
   /// The pose of the last accepted match, if any since the last reset.
   std::optional<Eigen::Isometry3d> lastAcceptedPose() const;
 
@@ -180,9 +188,10 @@ class Localizer {
   std::optional<Eigen::Isometry3d> pending_initial_pose_;
   std::optional<Eigen::Isometry3d> default_initial_pose_;
   std::optional<double> last_stamp_;
-  MotionBounds motion_seen_;  // fastest accepted motion since the initial pose
+  MotionBounds motion_seen_;                     // fastest accepted motion since the initial pose
   Matrix6d last_covariance_ = Matrix6d::Zero();  // of the last accepted match (ROS order)
-  bool have_source_ = false;  // source_ holds the last scan (for globalLocalize)
+  double reference_nvtl_ = 0.0;                  // of the last accepted match
+  bool have_source_ = false;                     // source_ holds the last scan (for globalLocalize)
 };
 
 }  // namespace grid_puzzle_localization

@@ -2,8 +2,8 @@
 #pragma once
 
 #include <Eigen/Core>
-#include <Eigen/Geometry>
 #include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <string>
 
 namespace grid_puzzle_localization {

@@ -94,12 +94,13 @@ struct PredictionConfig {
   double max_extrapolation = 1.0;
   /// [m/s] > 0: speed bound before a speed has been measured (the first scans after an initial pose).
   double max_speed = 15.0;
-  /// [rad/s] > 0: yaw-rate bound before one has been measured, when no gyro covers the interval.
-  double max_yaw_rate = 1.5;
+  /// [rad/s] > 0: yaw-rate bound before one has been measured, when no gyro covers the interval. Each 0.1 rad
+  /// of yaw range multiplies the search's candidates; a hand-held sensor without IMU may need 1.5.
+  double max_yaw_rate = 0.5;
   /// >= 1: the highest speed and yaw rate measured since the initial pose are multiplied by this.
   double margin = 1.5;
-  double min_radius = 1.0;   ///< [m] >= 0, search radius at zero elapsed time
-  double max_radius = 30.0;  ///< [m] >= min_radius
+  double min_radius = 1.0;     ///< [m] >= 0, search radius at zero elapsed time
+  double max_radius = 30.0;    ///< [m] >= min_radius
   double min_yaw_range = 0.0;  ///< [rad] >= 0, yaw searched at least this far when rotation is uncertain
 
   std::string validate() const;

@@ -24,13 +24,13 @@ struct SearchRegion {
 
 struct SearchConfig {
   double step = 1.0;          ///< [m] > 0, grid spacing of the x y candidates (about the NDT basin at 1 m voxels)
-  double yaw_step = 0.35;     ///< [rad] > 0, spacing of the yaw candidates (NDT converges from ~20 deg)
+  double yaw_step = 0.1;      ///< [rad] > 0, spacing of the yaw candidates (NDT converges from ~0.05-0.1 rad)
   int max_candidates = 3000;  ///< >= 1; a larger region is sampled with a coarser x y step
   int screen_points = 300;    ///< >= 10; scan points used to screen candidates (evenly subsampled)
-  int refine = 6;             ///< >= 1; best-screened candidates refined by NDT
+  int refine = 10;            ///< >= 1; best-screened candidates refined by NDT
   /// [0, 1]: the answer is refused when a refined pose farther than 2 * step from the best has NVTL >= this
   /// fraction of the best's (two places fit the scan about equally: a guess would be a coin toss).
-  double ambiguity_ratio = 0.97;
+  double ambiguity_ratio = 0.99;
 
   std::string validate() const;
 };

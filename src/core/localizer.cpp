@@ -77,6 +77,9 @@ std::string HypothesesConfig::validate() const {
   std::ostringstream err;
   if (!(yaw_step > 0.0)) err << "hypotheses/yaw_step must be > 0 rad (got " << yaw_step << "); ";
   if (!(yaw_count >= 0)) err << "hypotheses/yaw_count must be >= 0 (got " << yaw_count << "); ";
+  if (!(refine >= 1)) err << "hypotheses/refine must be >= 1 (got " << refine << "); ";
+  if (!(poor_nvtl_ratio >= 0.0 && poor_nvtl_ratio <= 1.0))
+    err << "hypotheses/poor_nvtl_ratio must be in [0, 1] (got " << poor_nvtl_ratio << "); ";
   return err.str();
 }
 
@@ -130,6 +133,15 @@ void Localizer::reset() {
   motion_seen_ = MotionBounds();
 }
 
+std::optional<Eigen::AlignedBox3d> Localizer::mapBounds() const {
+  if (!target_ || target_->gaussianCount() == 0) return std::nullopt;
+  Eigen::AlignedBox3d box;
+  target_->forEach([&](const VoxelKey&, const VoxelStats&, const auto& gaussian) {
+    if (gaussian.valid) box.extend(gaussian.mean.template cast<double>());
+  });
+  return box;
+}
+
 std::optional<Eigen::Isometry3d> Localizer::lastAcceptedPose() const {
   if (!predictor_.initialized()) return std::nullopt;
   return predictor_.pose();
@@ -145,17 +157,23 @@ SearchResult Localizer::globalLocalize(const SearchRegion& region) {
 
 std::optional<NdtResult> Localizer::tryHypotheses(const Eigen::Isometry3d& guess, const Eigen::Isometry3d& held,
                                                   bool rotation_known, LocalizerOutput& out) {
+  // Yaw offsets around the prediction and around the last accepted pose (a swing that reverses lands between
+  // them), screened by the NDT cost; the best few are aligned. With a known rotation: the last pose only.
+  SearchRegion around;
+  around.yaw_range = rotation_known ? 0.0 : config_.hypotheses.yaw_step * config_.hypotheses.yaw_count;
+  SearchConfig screen;
+  screen.yaw_step = config_.hypotheses.yaw_step;
+  screen.screen_points = config_.search.screen_points;
+  screen.refine = config_.hypotheses.refine;
   std::vector<Eigen::Isometry3d> guesses;
-  if (!guess.isApprox(held, 1e-6)) guesses.push_back(held);
-  if (!rotation_known)
-    for (int k = 1; k <= config_.hypotheses.yaw_count; ++k)
-      for (double sign : {1.0, -1.0}) {
-        Eigen::Isometry3d g = guess;
-        g.linear() = Eigen::AngleAxisd(sign * k * config_.hypotheses.yaw_step, Eigen::Vector3d::UnitZ()) * guess.linear();
-        guesses.push_back(g);
-      }
+  for (const Eigen::Isometry3d* centre : {&held, &guess}) {
+    if (rotation_known && centre == &guess) continue;
+    around.centre = *centre;
+    for (const Eigen::Isometry3d& g : searchCandidates(around, screen))
+      if (!g.isApprox(guess, 1e-9)) guesses.push_back(g);  // the prediction itself was matched already
+  }
   std::optional<NdtResult> best;
-  for (const Eigen::Isometry3d& g : guesses) {
+  for (const Eigen::Isometry3d& g : screenCandidates(aligner_, *target_, source_, guesses, screen)) {
     NdtResult r = aligner_.align(*target_, source_, g.cast<float>());
     ++out.hypotheses;
     if (acceptable(r) && (!best || r.nvtl > best->nvtl)) best = std::move(r);
@@ -221,8 +239,14 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     pending_initial_pose_.reset();
     motion_seen_ = MotionBounds();
     last_covariance_ = predictionCovariance(config_.covariance);
+    reference_nvtl_ = 0.0;
   }
   if (!predictor_.initialized()) {
+    // Kept (not deskewed: no motion is known) for a global search started while waiting.
+    preprocessor_.apply(scan, source_, &out.preprocess);
+    const Eigen::Isometry3f base_T_sensor_f = base_T_sensor.cast<float>();
+    for (Point& p : source_) p = base_T_sensor_f * p;
+    have_source_ = true;
     out.state = LocalizerState::kWaitingForInitialPose;
     out.scan_ms = msSince(start);
     return out;
@@ -260,27 +284,34 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   out.prediction = guess;
   const Clock::time_point align_start = Clock::now();
   bool searched = false;
+  // A match is poor when it fails the gate or scores well below the last accepted one (a false minimum
+  // can pass an absolute gate): then the hypotheses and, failing them, the search get a chance.
+  auto poor = [&](const NdtResult& r) {
+    return !acceptable(r) || r.nvtl < config_.hypotheses.poor_nvtl_ratio * reference_nvtl_;
+  };
+  std::optional<NdtResult> best;
+  auto consider = [&](std::optional<NdtResult> r) {
+    if (r && acceptable(*r) && (!best || r->nvtl > best->nvtl)) best = std::move(r);
+  };
   if (velocity_trusted) {
     out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
-    out.match_accepted = acceptable(out.ndt);
-    if (!out.match_accepted) {
-      if (std::optional<NdtResult> found = tryHypotheses(guess, held, rotation_known, out)) {
-        out.ndt = std::move(*found);
-        out.match_accepted = true;
-      }
-    }
+    consider(out.ndt);
+    if (poor(out.ndt)) consider(tryHypotheses(guess, held, rotation_known, out));
   }
-  if (!out.match_accepted) {
-    // No trusted velocity (start-up, a gap) or every hypothesis failed: search the bounded region.
+  if (!best || poor(*best)) {
+    // No trusted velocity (start-up, a gap) or the hypotheses did not help: search the bounded region.
     SearchResult found = searchPose(aligner_, *target_, source_, region, config_.search,
                                     [this](const NdtResult& m) { return acceptable(m); });
     searched = true;
     out.search_candidates = found.candidates;
     out.search_ambiguous = found.ambiguous;
-    if (found.best) {
-      out.ndt = std::move(*found.best);
-      out.match_accepted = true;
-    }
+    consider(std::move(found.best));
+    // The search saw a better fit than the best kept but could not tell it from another: nothing is sure.
+    if (found.ambiguous && best && found.best_nvtl > best->nvtl) best.reset();
+  }
+  if (best) {
+    out.ndt = std::move(*best);
+    out.match_accepted = true;
   }
   out.align_ms = msSince(align_start);  // with the hypotheses and the search
   if (out.match_accepted) {
@@ -299,10 +330,10 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
       predictor_.update(out.pose, stamp, config_.preprocess.deskew_twist_smoothing);
     if (predictor_.twistMeasured()) motion_seen_.add(predictor_.twist());
     out.covariance = last_covariance_ = matchCovariance(out.ndt, config_.covariance);
-    out.twist_covariance =
-        predictor_.twistMeasured() && elapsed > 0.0
-            ? bodyFrameCovariance(out.covariance, out.pose.rotation()) * (2.0 / (elapsed * elapsed))
-            : predictionCovariance(config_.covariance);
+    reference_nvtl_ = out.ndt.nvtl;
+    out.twist_covariance = predictor_.twistMeasured() && elapsed > 0.0
+                               ? bodyFrameCovariance(out.covariance, out.pose.rotation()) * (2.0 / (elapsed * elapsed))
+                               : predictionCovariance(config_.covariance);
   } else {
     // The bounded prediction: extrapolated while the velocity is trusted, else held at the last pose.
     out.pose = guess;
