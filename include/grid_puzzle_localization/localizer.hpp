@@ -128,7 +128,7 @@ struct LocalizerOutput {
   /// The pose may be published: a match was accepted, or the last accepted one is at most
   /// lost.max_coast_time old.
   bool publish = false;
-  double since_last_match = 0.0;     ///< [s] time since the last accepted match (0 when this one is)
+  double since_last_match = 0.0;     ///< [s] from the last accepted match (or initial pose) before this scan
   int hypotheses = 0;                ///< extra alignments from the hypotheses on this scan
   int search_candidates = 0;         ///< poses screened by the search on this scan (0: no search)
   bool search_ambiguous = false;     ///< the search found an acceptable pose but refused it as ambiguous
@@ -174,8 +174,9 @@ class Localizer {
 
   /// Searches `region` (map frame; the square of side 2 * radius, yaws within +-yaw_range, a full circle from pi)
   /// by branch and bound for the pose of the last scan given to processScan (its preprocessed points) and,
-  /// when an acceptable unambiguous pose is found, makes it the pose to start from at the next scan. Scan
-  /// thread only. With no scan or no map yet: not found, with the reason.
+  /// when an acceptable unambiguous pose is found, makes it the pose at that scan's stamp (the next scans search
+  /// around it, as after a pose without a velocity). Scan thread only. With no scan or no map yet: not found,
+  /// with the reason.
   GlobalLocalizationResult globalLocalize(const SearchRegion& region);
   /// The x y z extent of the current target's Gaussians (voxel means); empty without a map.
   std::optional<Eigen::AlignedBox3d> mapBounds() const;
@@ -209,7 +210,7 @@ class Localizer {
   MotionBounds motion_seen_;                     // fastest accepted motion since the initial pose
   Matrix6d last_covariance_ = Matrix6d::Zero();  // of the last accepted match (ROS order)
   double reference_nvtl_ = 0.0;                  // of the last accepted match
-  bool have_source_ = false;                     // source_ holds the last scan (for globalLocalize)
+  std::optional<double> source_stamp_;           // source_ holds the scan of this stamp (for globalLocalize)
   GlobalLocalizer global_;
   std::shared_ptr<const VoxelMap> global_target_;  // the target global_ was given (rebuilt when it changes)
   std::optional<double> last_global_search_;       // scan stamp of the last recovery search

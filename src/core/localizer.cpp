@@ -145,6 +145,7 @@ void Localizer::reset() {
   gyro_.clear();
   pending_initial_pose_ = default_initial_pose_;
   last_stamp_.reset();
+  source_stamp_.reset();
   motion_seen_ = MotionBounds();
 }
 
@@ -168,7 +169,7 @@ GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
     r.reason = "no map yet";
     return r;
   }
-  if (!have_source_) {
+  if (!source_stamp_) {
     r.reason = "no scan yet";
     return r;
   }
@@ -198,7 +199,15 @@ GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
 
 GlobalLocalizationResult Localizer::globalLocalize(const SearchRegion& region) {
   GlobalLocalizationResult r = searchGlobally(region);
-  if (r.found) setInitialPose(r.map_T_base);
+  if (!r.found) return r;
+  // The pose of the last scan, at its stamp: the next scans search around it with a radius that grows with
+  // the time since (the vehicle may move while the search runs), as after any pose without a velocity.
+  pending_initial_pose_.reset();
+  predictor_.reset(r.map_T_base, *source_stamp_);
+  motion_seen_ = MotionBounds();
+  last_covariance_ = matchCovariance(r.refinement, config_.covariance);
+  reference_nvtl_ = r.refinement.nvtl;
+  last_global_search_.reset();
   return r;
 }
 
@@ -294,7 +303,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     preprocessor_.apply(scan, source_, &out.preprocess);
     const Eigen::Isometry3f base_T_sensor_f = base_T_sensor.cast<float>();
     for (Point& p : source_) p = base_T_sensor_f * p;
-    have_source_ = true;
+    source_stamp_ = stamp;
     out.state = LocalizerState::kWaitingForInitialPose;
     out.scan_ms = msSince(start);
     return out;
@@ -315,7 +324,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   }
   const Eigen::Isometry3f base_T_sensor_f = base_T_sensor.cast<float>();
   for (Point& p : source_) p = base_T_sensor_f * p;
-  have_source_ = true;
+  source_stamp_ = stamp;
 
   std::optional<Eigen::Quaterniond> gyro_rotation;
   if (!fresh && config_.imu.use_gyro && gyro_.covers(predictor_.stamp(), stamp, config_.imu.max_gap))
@@ -384,9 +393,9 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     if (!out.pose.matrix().allFinite()) out.match_accepted = false;
   }
   out.lost = !out.match_accepted;
+  out.since_last_match = fresh ? 0.0 : elapsed;
   if (out.match_accepted) {
     out.recovered = !fresh && elapsed > config_.lost.max_coast_time;
-    out.since_last_match = 0.0;
     // A jump found by the global search after a gap is a correction, not a motion to extrapolate: the
     // velocity is measured again from the next match.
     if (fresh || found_globally)
@@ -402,7 +411,6 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   } else {
     // The bounded prediction: extrapolated while the velocity is trusted, else held at the last pose.
     out.pose = guess;
-    out.since_last_match = elapsed;
     out.covariance = coastingCovariance(last_covariance_, region, config_.covariance);
     out.twist_covariance = predictionCovariance(config_.covariance);
   }

@@ -167,7 +167,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     if (out.state == LocalizerState::kWaitingForInitialPose) maybeStartGlobalLocalization(msg->header.stamp);
     if (out.state != LocalizerState::kTracking) return;
     if (out.recovered)
-      NODELET_WARN("recovered: matching again after %.1f s without an accepted match%s", since_last_match_,
+      NODELET_WARN("recovered: matching again after %.1f s without an accepted match%s", out.since_last_match,
                    out.global_search ? " (global search)" : "");
     else if (out.global_search)
       NODELET_WARN_THROTTLE(2.0, "lost: global search around the last pose found nothing: %s",
@@ -177,7 +177,6 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
                             out.ndt.nvtl, out.search_ambiguous ? ", search ambiguous" : "",
                             out.publish ? "publishing the bounded prediction"
                                         : "not publishing odometry or TF (lost/max_coast_time exceeded)");
-    since_last_match_ = out.since_last_match;
     publish(out, msg->header);
   }
 
@@ -329,7 +328,6 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   TileDeltaSequence tile_sequence_;                        // tile_delta callback only (never concurrent)
   std::optional<LocalizerState> last_state_;               // for logging each state change once
   bool odom_published_by_others_ = false;
-  double since_last_match_ = 0.0;        // of the previous scan, for the recovery message
   ros::Time waiting_since_;              // first scan without an initial pose (automatic start)
   std::optional<Eigen::Vector2d> hint_;  // last initialpose_hint (map frame)
   ros::Publisher odom_pub_, status_pub_, aligned_pub_;
