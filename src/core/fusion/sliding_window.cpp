@@ -322,6 +322,10 @@ void SlidingWindow::solve() {
   ceres::Solver::Options solver;
   solver.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
   solver.max_num_iterations = config_.max_iterations;
+  // The IMU factors are stiff (information up to 1e10): start Levenberg-Marquardt near Gauss-Newton, or its
+  // damping of the weak directions takes ten iterations to relax.
+  solver.initial_trust_region_radius = 1e12;
+  solver.max_trust_region_radius = 1e16;
   solver.num_threads = 1;
   solver.logging_type = ceres::SILENT;
   ceres::Solver::Summary summary;
