@@ -177,7 +177,7 @@ TEST(SlidingWindow, ZeroVelocityUpdatesHoldAStandingRobotWithoutNdt) {
       worst = std::max(worst, (r.estimates[k].pose.translation() - r.estimates[9].pose.translation()).norm());
     return worst;
   };
-  EXPECT_LT(moved(ra), 0.01);
+  EXPECT_LT(moved(ra), 0.02);  // over 5 s; without the updates it is tens of centimetres (below)
   EXPECT_LT(ra.estimates.back().velocity.norm(), 0.01);
   // Without the zero-velocity updates the unestimated part of the bias integrates into drift.
   EXPECT_GT(moved(rb), 5.0 * moved(ra)) << "moved " << moved(rb) << " m without, " << moved(ra) << " m with";

@@ -268,7 +268,9 @@ std::optional<FusedState> SlidingWindow::addScan(double stamp, const Eigen::Isom
     if (in.gap > 0.0)
       warn("IMU dropout: " + std::to_string(in.gap) + " s of [" + std::to_string(prev.stamp) + ", " +
            std::to_string(stamp) + "] s without samples, bridged by a constant-velocity model");
-    if (in.stationary && config_.zupt_max_speed > 0.0) {
+    // A steady drive feels like standing still to an IMU: the previous state's velocity tells them apart, so
+    // it must have been estimated (a second state), not just the first state's zero-mean prior.
+    if (in.stationary && config_.zupt_max_speed > 0.0 && states_.size() >= 2) {
       Eigen::Matrix<double, 9, 1> std;
       std << Eigen::Vector3d::Constant(config_.zupt_velocity_std), Eigen::Matrix<double, 6, 1>::Constant(1e6);
       addFactor(SpeedBiasPrior::create(Eigen::Matrix<double, 9, 1>::Zero(), std), {state->speed_bias});
