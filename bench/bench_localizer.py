@@ -2,7 +2,8 @@
 localizer without roscore. Writes the scans, the gyro samples and the map to a temporary input file, runs the
 C++ bench_localizer once per map mode (cloud: the merged window rebuilt per change; tiles: incremental deltas)
 and once as the control (repeat: the same scan against a fixed map at every slot, whose spread is the machine's
-own) and prints one JSON line per run, with the machine it ran on. --quick: a 2 s drive (checks that it runs)."""
+own), then bench_fusion (the sliding-window update per scan), and prints one JSON line per run, with the machine
+it ran on. --quick: a 2 s drive (checks that it runs)."""
 
 from __future__ import annotations
 
@@ -74,6 +75,10 @@ def main() -> int:
                 cmd += ["--trace", str(args.trace / f"{mode}.csv")]
             out = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
             print(json.dumps({**json.loads(out), **hardware}), flush=True)
+    # The sliding-window fusion's per-scan update (its own closed-form drive, no map).
+    fusion_cmd = [str(args.exe.with_name("bench_fusion"))] + (["--scans", "40"] if args.quick else [])
+    out = subprocess.run(fusion_cmd, check=True, capture_output=True, text=True).stdout
+    print(json.dumps({**json.loads(out), **hardware}), flush=True)
     return 0
 
 

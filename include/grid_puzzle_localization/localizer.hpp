@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "grid_puzzle_localization/deskew.hpp"
+#include "grid_puzzle_localization/fusion/sliding_window.hpp"
 #include "grid_puzzle_localization/global_localization.hpp"
 #include "grid_puzzle_localization/map_update_worker.hpp"
 #include "grid_puzzle_localization/ndt.hpp"
@@ -68,6 +69,18 @@ struct LostConfig {
   std::string validate() const;
 };
 
+/// Pose tracking past the NDT match: none (NDT with the constant-velocity prediction) or the sliding-window
+/// factor graph with IMU preintegration (fusion/sliding_window.hpp).
+enum class FusionMode { kNone, kSlidingWindow };
+const char* toString(FusionMode mode);
+/// "none" or "sliding_window"; nothing for anything else.
+std::optional<FusionMode> parseFusionMode(const std::string& name);
+
+struct FusionConfig {
+  FusionMode mode = FusionMode::kNone;
+  SlidingWindowConfig window;  ///< used when mode is kSlidingWindow
+};
+
 struct LocalizerConfig {
   PreprocessConfig preprocess;  ///< applied in the sensor frame (ranges are from the sensor)
   /// Matching; its resolution is also the target's. One OpenMP thread by default, unlike NdtConfig's "all
@@ -87,6 +100,7 @@ struct LocalizerConfig {
   HypothesesConfig hypotheses;
   SearchConfig search;
   LostConfig lost;
+  FusionConfig fusion;
   /// The branch-and-bound search of recovery and globalLocalize. Its NDT refinement uses `ndt` above (the
   /// target is shared) with its own transformation_epsilon; one thread, like the matching.
   GlobalLocalizationConfig global = [] {
@@ -160,6 +174,11 @@ class Localizer {
   void setDefaultInitialPose(const Eigen::Isometry3d& map_T_base);
   /// Angular velocity of the base [rad/s, base frame] at `stamp` [s]. Scan thread only.
   void addGyro(double stamp, const Eigen::Vector3d& angular_velocity);
+  /// A full IMU sample (IMU frame, see fusion.window.base_T_imu): its rate feeds the gyro prediction and, with
+  /// fusion kSlidingWindow, the sample feeds the window. Scan thread only.
+  void addImu(const ImuSample& sample);
+  /// Warnings of the fusion since the last call (IMU dropouts, refused stamps...). Scan thread only.
+  std::vector<std::string> takeFusionWarnings();
 
   /// Localises one scan taken at `stamp` [s]: `scan` in the sensor frame, `base_T_sensor` the mounting.
   /// `times` (optional, one per point) are the capture times [s] after `stamp`; with them and
@@ -204,6 +223,7 @@ class Localizer {
   std::shared_ptr<const VoxelMap> target_;
   PosePredictor predictor_;
   GyroIntegrator gyro_;
+  std::unique_ptr<SlidingWindow> window_;  // fusion kSlidingWindow only
   std::optional<Eigen::Isometry3d> pending_initial_pose_;
   std::optional<Eigen::Isometry3d> default_initial_pose_;
   std::optional<double> last_stamp_;

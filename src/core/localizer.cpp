@@ -103,11 +103,20 @@ std::string LocalizerConfig::validate() const {
   std::ostringstream err;
   err << preprocess.validate() << ndt.validate() << covariance.validate() << match.validate() << imu.validate()
       << prediction.validate() << hypotheses.validate() << search.validate() << lost.validate();
+  if (fusion.mode == FusionMode::kSlidingWindow) err << fusion.window.validate();
   const std::string global_problem = globalConfig(*this).validate();
   if (!global_problem.empty()) err << "global_localization: " << global_problem << "; ";
   if (!(map_update_threads >= 0)) err << "map_update_threads must be >= 0 (0 = all cores); ";
   if (!(time_jump_back > 0.0)) err << "time_jump_back must be > 0 s (got " << time_jump_back << "); ";
   return err.str();
+}
+
+const char* toString(FusionMode mode) { return mode == FusionMode::kSlidingWindow ? "sliding_window" : "none"; }
+
+std::optional<FusionMode> parseFusionMode(const std::string& name) {
+  if (name == "none") return FusionMode::kNone;
+  if (name == "sliding_window") return FusionMode::kSlidingWindow;
+  return std::nullopt;
 }
 
 const char* toString(LocalizerState state) {
@@ -127,7 +136,9 @@ Localizer::Localizer(const LocalizerConfig& config)
       preprocessor_(config.preprocess),
       aligner_(config.ndt),
       worker_(workerParams(config)),
-      global_(globalConfig(config)) {}
+      global_(globalConfig(config)),
+      window_(config.fusion.mode == FusionMode::kSlidingWindow ? std::make_unique<SlidingWindow>(config.fusion.window)
+                                                               : nullptr) {}
 
 void Localizer::setInitialPose(const Eigen::Isometry3d& map_T_base) { pending_initial_pose_ = map_T_base; }
 
@@ -140,8 +151,18 @@ void Localizer::addGyro(double stamp, const Eigen::Vector3d& angular_velocity) {
   if (angular_velocity.allFinite()) gyro_.add(stamp, angular_velocity);
 }
 
+void Localizer::addImu(const ImuSample& sample) {
+  addGyro(sample.stamp, config_.fusion.window.base_T_imu.rotation() * sample.gyro);
+  if (window_) window_->addImu(sample);
+}
+
+std::vector<std::string> Localizer::takeFusionWarnings() {
+  return window_ ? window_->takeWarnings() : std::vector<std::string>();
+}
+
 void Localizer::reset() {
   predictor_ = PosePredictor();
+  if (window_) window_->reset();
   gyro_.clear();
   pending_initial_pose_ = default_initial_pose_;
   last_stamp_.reset();
@@ -333,8 +354,13 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   // The last accepted pose, turned by the gyro when it covers the time since.
   Eigen::Isometry3d held = predictor_.pose();
   if (gyro_rotation) held.linear() = predictor_.pose().linear() * gyro_rotation->toRotationMatrix();
-  const Eigen::Isometry3d guess =
-      velocity_trusted ? predictor_.predict(stamp, gyro_rotation ? &*gyro_rotation : nullptr) : held;
+  // With the window, its IMU-propagated state is the prediction (while the window holds a recent state).
+  const std::optional<FusedState> fused_prediction =
+      window_ && !fresh && elapsed <= config_.prediction.max_extrapolation ? window_->predict(stamp) : std::nullopt;
+  const Eigen::Isometry3d guess = fused_prediction ? fused_prediction->pose
+                                  : velocity_trusted
+                                      ? predictor_.predict(stamp, gyro_rotation ? &*gyro_rotation : nullptr)
+                                      : held;
   const SearchRegion region =
       boundedSearchRegion(held, fresh ? 0.0 : elapsed, motion_seen_, rotation_known, config_.prediction);
 
@@ -413,6 +439,16 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     out.pose = guess;
     out.covariance = coastingCovariance(last_covariance_, region, config_.covariance);
     out.twist_covariance = predictionCovariance(config_.covariance);
+  }
+  if (window_) {
+    // A new start or a jump found by the global search begins a new window; the fused state replaces the match.
+    if (fresh || found_globally) window_->reset();
+    const Matrix6d information =
+        out.match_accepted ? ndtInformation(out.pose, covarianceFromHessian(out.ndt.hessian, config_.covariance))
+                           : Matrix6d::Zero();
+    const std::optional<FusedState> fused =
+        window_->addScan(stamp, out.match_accepted ? &out.pose : nullptr, information);
+    if (fused && fused->stamp == stamp && out.match_accepted) out.pose = fused->pose;
   }
   out.publish = out.match_accepted || out.since_last_match <= config_.lost.max_coast_time;
   out.twist = predictor_.twist();

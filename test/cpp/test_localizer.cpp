@@ -59,6 +59,45 @@ TEST(Localizer, WaitsForMapThenInitialPoseThenTracksGroundTruth) {
   EXPECT_NEAR(out.twist(0), std::hypot(4.0, 0.8 * std::cos(0.4 * 4.0)), 0.2);
 }
 
+TEST(Localizer, SlidingWindowFusionTracksGroundTruthWithImu) {
+  const gpl::PointCloud world = t::makeWorld();
+  gpl::LocalizerConfig config = testConfig();
+  config.fusion.mode = gpl::FusionMode::kSlidingWindow;
+  gpl::Localizer loc(config);
+  loc.map().submit(gpl::MapChange::fullCloud(world));
+  loc.map().waitIdle();
+  loc.setInitialPose(truthAt(0.0));
+  // Noise-free IMU at base_link, 200 Hz: the drive's yaw rate and specific force by central differences.
+  auto imuAt = [](double time) {
+    const double h = 1e-3;
+    const Eigen::Isometry3d a = truthAt(time - h), b = truthAt(time), c = truthAt(time + h);
+    gpl::ImuSample s;
+    s.stamp = time;
+    s.gyro = Eigen::AngleAxisd(a.rotation().transpose() * c.rotation()).angle() / (2 * h) *
+             Eigen::AngleAxisd(a.rotation().transpose() * c.rotation()).axis();
+    const Eigen::Vector3d accel = (a.translation() - 2 * b.translation() + c.translation()) / (h * h);
+    s.accel = b.rotation().transpose() * (accel + Eigen::Vector3d(0, 0, 9.80665));
+    return s;
+  };
+  double worst = 0.0;
+  int imu = 0;
+  for (int i = 0; i <= 40; ++i) {
+    const double time = 0.1 * i;
+    for (; imu / 200.0 <= time + 1e-9; ++imu) loc.addImu(imuAt(imu / 200.0));
+    const gpl::LocalizerOutput out = loc.processScan(time, scanAt(world, time, 10 + i), mount());
+    ASSERT_EQ(out.state, gpl::LocalizerState::kTracking);
+    ASSERT_TRUE(out.pose.matrix().allFinite());
+    EXPECT_TRUE(out.match_accepted) << "scan " << i;
+    worst = std::max(worst, t::translationError(out.pose, truthAt(time)));
+    EXPECT_LT(t::rotationError(out.pose, truthAt(time)), 0.005);
+    // After a few states the window's IMU prediction is the match's starting point, and it is close.
+    if (i >= 5) EXPECT_LT(t::translationError(out.prediction, truthAt(time)), 0.05) << "scan " << i;
+  }
+  EXPECT_LT(worst, 0.05);
+  EXPECT_EQ(gpl::parseFusionMode("sliding_window"), gpl::FusionMode::kSlidingWindow);
+  EXPECT_FALSE(gpl::parseFusionMode("ukf"));
+}
+
 TEST(Localizer, RecoversFromOneMetreFiveDegreeInitialOffset) {
   const gpl::PointCloud world = t::makeWorld();
   gpl::Localizer loc(testConfig());
