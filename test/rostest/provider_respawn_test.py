@@ -93,11 +93,21 @@ class Mirror:
                     np.testing.assert_array_equal(points[name], file_points[name].astype(np.float32))
 
 
-def node_pid(name):
-    uri = rosnode.get_api_uri(rosgraph.Master("/provider_respawn_test"), name)
-    code, _, pid = xmlrpc.client.ServerProxy(uri).getPid("/provider_respawn_test")
-    assert code == 1
-    return pid
+def node_pid(name, other_than=None):
+    """The pid of node ``name`` as the master knows it; with ``other_than``, waits until a process with
+    another pid has registered (the master keeps a killed node's URI until its successor registers)."""
+    deadline = time.monotonic() + WAIT
+    while True:
+        try:
+            uri = rosnode.get_api_uri(rosgraph.Master("/provider_respawn_test"), name, skip_cache=True)
+            code, _, pid = xmlrpc.client.ServerProxy(uri).getPid("/provider_respawn_test")
+            if code == 1 and pid != other_than:
+                return pid
+        except OSError:  # the URI of the killed process
+            pass
+        if time.monotonic() > deadline:
+            raise AssertionError(f"no process other than {other_than} registered as {name} within {WAIT} s")
+        time.sleep(0.2)
 
 
 class ProviderRespawnTest(unittest.TestCase):
@@ -143,7 +153,7 @@ class ProviderRespawnTest(unittest.TestCase):
         os.kill(pid, signal.SIGKILL)
         t, reset, keys = self.mirror.wait_for(lambda t, d: t > killed and d.reset, "reset after the kill")
         recovery = t - killed
-        self.assertNotEqual(node_pid("/provider"), pid, "the provider was not respawned")
+        node_pid("/provider", other_than=pid)  # respawned
         self.assertTrue(math.isfinite(recovery))
         self.mirror.check_against_files(reset, keys)
         # The drive goes on: later deltas keep the mirror equal to the window.
