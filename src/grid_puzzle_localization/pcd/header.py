@@ -177,8 +177,10 @@ def _checked_header(entries: dict[str, list[str]], offset: int, path) -> PcdHead
             viewpoint = ()
         if len(viewpoint) != 7:
             raise PcdError(f"{path}: bad header line 'VIEWPOINT {' '.join(entries['VIEWPOINT'])}' (7 numbers)")
-    version = entries.get("VERSION", ["0.7"])[0]
-    return PcdHeader(fields, sizes, types, counts, width, height, points, data, viewpoint, version, offset)
+    version = entries.get("VERSION", ["0.7"])
+    if not version:
+        raise PcdError(f"{path}: bad header line 'VERSION' (expected the format version, e.g. VERSION 0.7)")
+    return PcdHeader(fields, sizes, types, counts, width, height, points, data, viewpoint, version[0], offset)
 
 
 def _ints(entries: dict[str, list[str]], key: str, path, single: bool = False) -> tuple[int, ...]:
