@@ -70,7 +70,8 @@ def markdown(fuzzed: list[dict], faults: list[dict], verdicts: list[dict]) -> st
     lines += ["", "| fault | outcome | recovery [s] | data lost |", "|---|---|---|---|"]
     for f in faults:
         recovery = "-" if f["recovery_s"] is None else f"{f['recovery_s']:g}"
-        lines.append(f"| {f['fault']} | {f['outcome']} | {recovery} | {f['data_lost']} |")
+        outcome = f["outcome"].replace("\n", " / ")  # stderr of several lines
+        lines.append(f"| {f['fault']} | {outcome} | {recovery} | {f['data_lost']} |")
     lines += ["", "| test | verdict |", "|---|---|"]
     lines += [f"| {v['test']} | {v['verdict']} {v['reason']} |" for v in verdicts]
     return "\n".join(lines)
