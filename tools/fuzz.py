@@ -71,7 +71,7 @@ def run_target(target: Target, args: argparse.Namespace) -> dict:
     if regressions:
         replay = subprocess.run(base + [str(p) for p in regressions], env=env, capture_output=True, text=True)
         if replay.returncode != 0:
-            found.append("regression input fails again: " + last_error(replay.stderr))
+            found.append(f"regression input fails again (exit status {replay.returncode}): {last_error(replay.stderr)}")
     started = time.monotonic()
     options = ["-print_final_stats=1", f"-max_total_time={args.seconds}"]
     fuzz = subprocess.run(
@@ -84,7 +84,7 @@ def run_target(target: Target, args: argparse.Namespace) -> dict:
     scratch.cleanup()
     (work / f"{target.name}.log").write_text(fuzz.stderr)
     if fuzz.returncode != 0:
-        found.append(last_error(fuzz.stderr))
+        found.append(f"exit status {fuzz.returncode}: {last_error(fuzz.stderr)}")
     executions = stat(fuzz.stderr, r"stat::number_of_executed_units:\s*(\d+)") or stat(fuzz.stderr, r"#(\d+)\s")
     return {
         "target": target.name,

@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """`make reliability`: fuzzes every reader of outside data (tools/fuzz.py), runs the fault tests
-(test/python/test_fault_*.py, which record each fault's outcome) and the replay of the inputs fuzzing
-found, then prints the report as a markdown table and writes it as JSON lines to build/reliability/
-report.jsonl. Exit status 1 when a fuzzer found something or a fault test failed."""
+(test/python/test_fault_*.py and test/rostest/provider_respawn.test, which record each fault's outcome)
+and the replay of the inputs fuzzing found, then prints the report as a markdown table and writes it as
+JSON lines to build/reliability/report.jsonl. Exit status 1 when a fuzzer found something or a fault
+test failed."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+ROSTESTS = ("provider_respawn.test",)
 FAULT_TESTS = (
     "test/python/test_fault_disk.py",
     "test/python/test_fuzz_regressions.py",
@@ -31,7 +33,7 @@ def fuzz(args: argparse.Namespace) -> list[dict]:
 
 
 def fault_tests() -> tuple[list[dict], list[dict]]:
-    """(fault records, one verdict per test case) of a pytest run of FAULT_TESTS."""
+    """(fault records, one verdict per test case) of a pytest run of FAULT_TESTS and of the ROSTESTS."""
     with tempfile.TemporaryDirectory() as tmp:
         records, junit = Path(tmp) / "faults.jsonl", Path(tmp) / "junit.xml"
         env = {**os.environ, "GPL_FAULT_REPORT": str(records)}
@@ -41,7 +43,6 @@ def fault_tests() -> tuple[list[dict], list[dict]]:
             env=env,
             stdout=sys.stderr,
         )
-        faults = [json.loads(line) for line in records.read_text().splitlines()] if records.exists() else []
         verdicts = []
         for case in ET.parse(junit).getroot().iter("testcase"):
             problem = case.find("failure") if case.find("failure") is not None else case.find("error")
@@ -49,6 +50,11 @@ def fault_tests() -> tuple[list[dict], list[dict]]:
             verdict = "failed" if problem is not None else "skipped" if skipped is not None else "passed"
             reason = (problem if problem is not None else skipped).get("message", "") if verdict != "passed" else ""
             verdicts.append({"test": case.get("name"), "verdict": verdict, "reason": reason[:200]})
+        for name in ROSTESTS:
+            command = ["rostest", f"--results-base-dir={tmp}/rostest", "grid_puzzle_localization", name]
+            done = subprocess.run(command, cwd=ROOT, env=env, stdout=sys.stderr)
+            verdicts.append({"test": name, "verdict": "passed" if done.returncode == 0 else "failed", "reason": ""})
+        faults = [json.loads(line) for line in records.read_text().splitlines()] if records.exists() else []
     return faults, verdicts
 
 
@@ -63,7 +69,8 @@ def markdown(fuzzed: list[dict], faults: list[dict], verdicts: list[dict]) -> st
     lines += ["", "| fault | outcome | recovery [s] | data lost |", "|---|---|---|---|"]
     for f in faults:
         recovery = "-" if f["recovery_s"] is None else f"{f['recovery_s']:g}"
-        lines.append(f"| {f['fault']} | {f['outcome']} | {recovery} | {f['data_lost']} |")
+        outcome = f["outcome"].replace("\n", " / ")  # stderr of several lines
+        lines.append(f"| {f['fault']} | {outcome} | {recovery} | {f['data_lost']} |")
     lines += ["", "| test | verdict |", "|---|---|"]
     lines += [f"| {v['test']} | {v['verdict']} {v['reason']} |" for v in verdicts]
     return "\n".join(lines)

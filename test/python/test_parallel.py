@@ -35,13 +35,22 @@ def test_failed_child_raises_after_the_block(tmp_path):
     assert (tmp_path / "caller").exists()
 
 
-def test_caller_failure_still_waits_for_the_child(tmp_path):
+def test_caller_failure_stops_and_waits_for_the_child(tmp_path):
+    """The caller's output is discarded when it fails, so its child is stopped, and it is waited for: no
+    child outlives the block, and one that would have run for a minute leaves no result."""
+
     def job() -> None:
+        (tmp_path / "pid").write_text(str(os.getpid()))
+        time.sleep(60)
         (tmp_path / "job").write_text("done")
 
     with pytest.raises(ValueError), in_background([job], fork=True):
+        while not (tmp_path / "pid").exists():
+            time.sleep(0.01)
         raise ValueError("index failed")
-    assert (tmp_path / "job").read_text() == "done"  # the child had finished before the error surfaced
+    with pytest.raises(ProcessLookupError):
+        os.kill(int((tmp_path / "pid").read_text()), 0)  # waited for (reaped), not a zombie
+    assert not (tmp_path / "job").exists()
 
 
 def test_two_jobs_run_in_two_children(tmp_path):

@@ -18,6 +18,7 @@ from grid_puzzle_localization.util.iteration import zip_equal
 ENCODINGS = ("ascii", "binary", "binary_compressed")
 IDENTITY_VIEWPOINT = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
 _MAX_HEADER_BYTES = 1 << 16
+_MAX_RECORD_BYTES = (1 << 31) - 1  # numpy's limit on a record type (and far beyond any real PCD layout)
 _KINDS = {"I": "i", "U": "u", "F": "f"}
 _VALID_SIZES = {"I": (1, 2, 4, 8), "U": (1, 2, 4, 8), "F": (2, 4, 8)}
 _KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA")
@@ -160,6 +161,9 @@ def _checked_header(entries: dict[str, list[str]], offset: int, path) -> PcdHead
     for name, size, t, count in zip_equal(fields, sizes, types, counts):
         if t not in _VALID_SIZES or size not in _VALID_SIZES[t] or count < 1:
             raise PcdError(f"{path}: field '{name}' has unsupported TYPE {t} SIZE {size} COUNT {count}")
+    record_bytes = sum(s * c for s, c in zip(sizes, counts, strict=True))
+    if record_bytes > _MAX_RECORD_BYTES:
+        raise PcdError(f"{path}: SIZE x COUNT make a point record of {record_bytes} bytes; the COUNT line is corrupt")
     width, height, points = (_ints(entries, key, path, single=True)[0] for key in ("WIDTH", "HEIGHT", "POINTS"))
     if width * height != points:
         raise PcdError(f"{path}: WIDTH {width} x HEIGHT {height} disagrees with POINTS {points}")
@@ -174,8 +178,10 @@ def _checked_header(entries: dict[str, list[str]], offset: int, path) -> PcdHead
             viewpoint = ()
         if len(viewpoint) != 7:
             raise PcdError(f"{path}: bad header line 'VIEWPOINT {' '.join(entries['VIEWPOINT'])}' (7 numbers)")
-    version = entries.get("VERSION", ["0.7"])[0]
-    return PcdHeader(fields, sizes, types, counts, width, height, points, data, viewpoint, version, offset)
+    version = entries.get("VERSION", ["0.7"])
+    if not version:
+        raise PcdError(f"{path}: bad header line 'VERSION' (expected the format version, e.g. VERSION 0.7)")
+    return PcdHeader(fields, sizes, types, counts, width, height, points, data, viewpoint, version[0], offset)
 
 
 def _ints(entries: dict[str, list[str]], key: str, path, single: bool = False) -> tuple[int, ...]:

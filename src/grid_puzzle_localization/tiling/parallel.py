@@ -82,10 +82,10 @@ def in_background(
 ) -> Iterator[None]:
     """Runs each job in its own forked child during the with-block (or, with ``fork`` False, all of
     them right away in this process). Leaving the block waits for every child, even when the block
-    raised, so no child outlives its caller; a failed child raises OSError. ``while_waiting`` is called
-    again and again while the children are still running after the block, with a pause of up to
-    WAIT_PAUSE_S that ends early when a child exits (the tiler flushes the files they have written so
-    far, so that little is left to flush at the end)."""
+    raised (then after stopping them with SIGTERM), so no child outlives its caller; a failed child
+    raises OSError. ``while_waiting`` is called again and again while the children are still running
+    after the block, with a pause of up to WAIT_PAUSE_S that ends early when a child exits (the tiler
+    flushes the files they have written so far, so that little is left to flush at the end)."""
     if not (fork and hasattr(os, "fork")):
         for job in jobs:
             job()
@@ -111,6 +111,13 @@ def in_background(
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         yield
+    except BaseException:
+        # The caller failed or was interrupted (SIGINT sent to this process alone reaches no child): its
+        # output is discarded, so the children are stopped rather than left to write every tile first.
+        for pid in children:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGTERM)
+        raise
     finally:
         try:
             codes = _wait_for(children, while_waiting)
