@@ -44,6 +44,8 @@ STEP = 2.0  # [m] between keyframes on the walk
 
 def load_map() -> tuple[np.ndarray, list[Path]]:
     files = sorted((DATA / "tiles").glob("*.pcd"))
+    if not files:
+        raise SystemExit(f"bench_blocks: no campus tiles in {DATA / 'tiles'}; this benchmark needs ../shared/data/real")
     parts = [xyz_array(chunk) for f in files if read_pcd_header(f).points for chunk in iter_pcd_chunks(f)]
     return np.concatenate(parts), files
 

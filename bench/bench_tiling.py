@@ -63,7 +63,7 @@ def main() -> int:
     args = parser.parse_args()
     inputs = sorted(CAMPUS_TILES.glob("*.pcd"))
     if not inputs:
-        raise SystemExit(f"bench_tiling: no campus tiles in {CAMPUS_TILES}")
+        raise SystemExit(f"bench_tiling: no campus tiles in {CAMPUS_TILES}; this benchmark needs ../shared/data/real")
     args.tmp_dir.mkdir(parents=True, exist_ok=True)
     load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="bench_tiling_", dir=args.tmp_dir) as tmp:
