@@ -96,3 +96,10 @@ bench-monitor: build
 # make experiment-paper [SCENARIOS="courtyard urban"]
 experiment-paper: build
 	@$(SETUP) bash $(ROOT)/tools/experiment_paper.sh $(SCENARIOS)
+
+# ---------------------------------------------------------------- real data
+.PHONY: experiment-real
+# make experiment-real [VARIANTS="plain drop10 gaps"]: MulRan Riverside02 keyframes (../shared/data/real) imported
+# and localized in both modes; one JSON line per run and mode. Long-running (real-time playback); not part of CI.
+experiment-real: build
+	@$(SETUP) python3 $(ROOT)/tools/experiment_real.py $(VARIANTS)
