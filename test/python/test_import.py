@@ -198,7 +198,7 @@ def test_map_from_scans_is_their_voxel_filter(recording, tmp_path):
 @pytest.fixture(scope="module")
 def simulated(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("roundtrip") / "sim"
-    generate(ScenarioConfig(world="courtyard", seed=7, scale=0.25, duration=1.5, map_leaf=0.2), out, progress=False)
+    generate(ScenarioConfig(world="courtyard", seed=7, scale=0.25, duration=4.0, map_leaf=0.1), out, progress=False)
     return out
 
 
@@ -234,7 +234,7 @@ def test_simulated_scenario_exported_and_imported_gives_the_same_experiment_inpu
     with rosbag.Bag(str(after.bag)) as bag:
         clouds = [m for _, m, _ in bag.read_messages(topics=["points"])]
         tf = [m for _, m, _ in bag.read_messages(topics=["/tf_static"])]
-    assert len(clouds) == len(originals) == 15
+    assert len(clouds) == len(originals) == 40
     for ours, theirs in zip(clouds, originals):  # noqa: B905 (Python 3.8)
         assert ours.header.stamp == theirs.header.stamp and ours.header.frame_id == theirs.header.frame_id
         assert ours.fields == theirs.fields and ours.data == theirs.data and ours.width == theirs.width
@@ -247,3 +247,29 @@ def test_simulated_scenario_exported_and_imported_gives_the_same_experiment_inpu
     np.testing.assert_allclose(np.abs(np.sum(imported.quat * truth.quat[rows], axis=1)), 1.0, atol=1e-9)
     # the experiment starts both at the same pose
     assert imported.t[0] == pytest.approx(truth.t[0], abs=1e-6)
+
+
+def test_imported_scenario_gives_the_same_experiment_figures(simulated, tmp_path):
+    # The localizer on the original scenario and on its import: the same scans, map and start pose (the import
+    # carries no IMU, which the localizer does not need), so the same accuracy within a few millimetres.
+    extrinsic, _ = export(simulated, tmp_path / "rec")
+    extra = ["--map", str(simulated / "global_map.pcd"), "--extrinsic", *map(repr, extrinsic.tolist())]
+    assert run_import(tmp_path / "rec", tmp_path / "imported", *extra) == 0
+    ape = {}
+    for name, scenario in (("original", simulated), ("imported", tmp_path / "imported")):
+        argv = [
+            "experiment",
+            str(scenario),
+            "-o",
+            str(tmp_path / f"run_{name}"),
+            "--modes",
+            "global",
+            "--settle",
+            "1.5",
+        ]
+        assert cli.main(argv) == 0
+        summary = yaml.safe_load((tmp_path / f"run_{name}" / "summary.json").read_text())
+        ape[name] = summary["modes"]["global"]["ape"]["translation_m"]
+    assert ape["imported"]["pairs"] >= 35 and ape["original"]["pairs"] >= 35
+    assert ape["original"]["rmse"] < 0.1 and ape["imported"]["rmse"] < 0.1
+    assert abs(ape["imported"]["rmse"] - ape["original"]["rmse"]) < 0.01
