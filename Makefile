@@ -97,9 +97,14 @@ bench-monitor: build
 experiment-paper: build
 	@$(SETUP) bash $(ROOT)/tools/experiment_paper.sh $(SCENARIOS)
 
-# ---------------------------------------------------------------- real data
-.PHONY: experiment-real
-# make experiment-real [VARIANTS="plain drop10 gaps"]: MulRan Riverside02 keyframes (../shared/data/real) imported
-# and localized in both modes; one JSON line per run and mode. Long-running (real-time playback); not part of CI.
+# ---------------------------------------------------------------- tracking on real and hard recordings
+.PHONY: experiment-real experiment-hard
+# One JSON line per variant and mode (tools/experiment_tracking.py); long-running (real-time playback), not in CI.
+# make experiment-real: MulRan Riverside02 keyframes (../shared/data/real) as recorded, 10 % dropped, with gaps.
+# make experiment-hard: simulated hand-held walks (10 Hz and 2 Hz scans) and a recording with gaps.
+# VARIANTS="mulran handheld_2hz ..." runs only those.
 experiment-real: build
-	@$(SETUP) python3 $(ROOT)/tools/experiment_real.py $(VARIANTS)
+	@$(SETUP) python3 $(ROOT)/tools/experiment_tracking.py $(or $(VARIANTS),real)
+
+experiment-hard: build
+	@$(SETUP) python3 $(ROOT)/tools/experiment_tracking.py $(or $(VARIANTS),hard)
