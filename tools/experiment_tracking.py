@@ -13,7 +13,9 @@ stopped, so no keyframe was saved).
 
 Simulated (``make experiment-hard``): 60 s of the courtyard walk (scale 0.25, seed 0) from `gpm simulate`,
 - ``handheld_10hz`` and ``handheld_2hz``: hand-held, the yaw swinging +-30 deg every 0.5 s, every sweep or 2 Hz;
-- ``sim_gaps``: nothing recorded for 2, 4 and 8 s, 15, 30 and 45 s into the run.
+- ``sim_gaps``: nothing recorded for 2, 4 and 8 s, 15, 30 and 45 s into the run;
+- ``handheld_2hz_no_imu``, ``sim_gaps_no_imu``: the same without an IMU (a LiDAR-only recording, like the
+  real hand-held one that lost track).
 
 Each is run by `gpm experiment` in both modes; one JSON object per variant and mode is printed: the APE of the
 published poses and whether the localizer kept track (evaluation/tracking.py). Outputs go to
@@ -53,9 +55,17 @@ VARIANTS: dict[str, tuple[list[str], str]] = {
     "mulran_gaps": (["import", *MULRAN_IMPORT, *GAPS], "FAST-LIO2 odometry"),
     "handheld_10hz": (["simulate", *SIMULATE, "--yaw-swing"], "simulator ground truth"),
     "handheld_2hz": (["simulate", *SIMULATE, "--yaw-swing", "--scan-rate", "2"], "simulator ground truth"),
+    "handheld_2hz_no_imu": (
+        ["simulate", *SIMULATE, "--yaw-swing", "--scan-rate", "2", "--no-imu"],
+        "simulator ground truth",
+    ),
     "sim_gaps": (["simulate", *SIMULATE, *GAPS], "simulator ground truth"),
+    "sim_gaps_no_imu": (["simulate", *SIMULATE, *GAPS, "--no-imu"], "simulator ground truth"),
 }
-SETS = {"real": ["mulran", "mulran_drop10", "mulran_gaps"], "hard": ["handheld_10hz", "handheld_2hz", "sim_gaps"]}
+SETS = {
+    "real": ["mulran", "mulran_drop10", "mulran_gaps"],
+    "hard": ["handheld_10hz", "handheld_2hz", "handheld_2hz_no_imu", "sim_gaps", "sim_gaps_no_imu"],
+}
 
 
 def scan_stamps(bag: Path) -> list[float]:

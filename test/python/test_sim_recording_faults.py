@@ -95,5 +95,8 @@ def test_simulate_command_line_options(tmp_path, capsys):
     args = ["simulate", "courtyard", "-o", str(tmp_path / "s"), "--scale", "0.25", "--duration", "2", "--quiet"]
     assert cli.main([*args, "--yaw-swing", "--scan-rate", "2", "--gap", "0.5", "0.5", "--map-density", "0.3"]) == 0
     assert "3 sweeps" in capsys.readouterr().out  # 0, 1.0 and 1.5 s: the one at 0.5 s falls in the gap
+    assert cli.main([*args, "--no-imu", "--force"]) == 0
+    with rosbag.Bag(str(tmp_path / "s" / "scenario.bag")) as bag:
+        assert set(bag.get_type_and_topic_info().topics) == {"points", "ground_truth", "/tf_static"}
     assert cli.main([*args, "--gap", "5", "1", "--force"]) == 2
     assert "--gap 5.0 1.0: the gap must start inside the run" in capsys.readouterr().err

@@ -50,6 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--gap", type=float, nargs=2, action="append", default=[], metavar=("START", "LENGTH"),
         help="record nothing from START to START+LENGTH seconds into the run (repeatable)",
     )  # fmt: skip
+    parser.add_argument("--no-imu", action="store_true", help="record no IMU (a LiDAR-only recording)")
     parser.add_argument("--force", action="store_true", help="replace a non-empty output directory")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
@@ -69,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
         yaw_swing=YawSwing(swing_deg=args.yaw_swing) if args.yaw_swing is not None else None,
         scan_rate=args.scan_rate,
         gaps=tuple(tuple(g) for g in args.gap),
+        imu=not args.no_imu,
     )
     summary = generate(cfg, args.output or args.scenario, force=args.force, progress=not args.quiet)
     print(

@@ -60,6 +60,7 @@ class ScenarioConfig:
     movers: int | None = None  # moving pedestrians/cars in the scans (not in the map); None: world default
     drift: DriftBounds = field(default_factory=DriftBounds)
     imu_noise: ImuNoise = field(default_factory=ImuNoise)
+    imu: bool = True  # False: no imu topic (a LiDAR-only recording)
     yaw_swing: YawSwing | None = None  # hand-held: the localization run's yaw swings (the map run does not)
     scan_rate: float | None = None  # [Hz] scans written to the bag (every n-th sweep); None: every sweep
     gaps: tuple[tuple[float, float], ...] = ()  # (start, length) [s]: nothing recorded in these intervals
@@ -177,7 +178,8 @@ def _write_bag(
             """IMU and ground truth samples i0 .. i1 - 1 (ground truth every gt_step-th sample) outside the gaps."""
             i = np.arange(i0, min(i1, len(traj.position)))
             i = i[~in_gaps(i / RATE, cfg.gaps)]
-            bag.write_imu(_sample_stamps_ns(t0, i), imu.gyro[i], imu.accel[i], gyro_var, accel_var)
+            if cfg.imu:
+                bag.write_imu(_sample_stamps_ns(t0, i), imu.gyro[i], imu.accel[i], gyro_var, accel_var)
             g = i[i % gt_step == 0]
             stamps = _sample_stamps_ns(t0, g)
             bag.write_ground_truth(stamps, traj.position[g], traj.quat[g], vel_body[g], gyro_true[g])
@@ -244,7 +246,12 @@ def _describe(cfg: ScenarioConfig, world, loc: Trajectory, mapping: Trajectory, 
         "movers": {kind: movers.kinds.count(kind) for kind in sorted(set(movers.kinds))},
         "mapping_run": {"duration_s": float(mapping.duration), "length_m": round(mapping.length(), 3)},
         "frames": {"map": "map", "base": "base_link", "lidar": "lidar"},
-        "topics": {"points": "points", "imu": "imu", "ground_truth": "ground_truth", "tf_static": "/tf_static"},
+        "topics": {
+            "points": "points",
+            **({"imu": "imu"} if cfg.imu else {}),
+            "ground_truth": "ground_truth",
+            "tf_static": "/tf_static",
+        },
         "files": list(FILES),
     }
 
