@@ -82,6 +82,15 @@ bench-sim: setup
 	  bash $(ROOT)/tools/build.sh >$$log 2>&1 || { tail -40 $$log; exit 1; }
 	@$(SETUP) python3 $(ROOT)/bench/bench_sim.py
 
+# ---------------------------------------------------------------- global localization
+.PHONY: bench-global-localization
+# make bench-global-localization [ARGS="--quick" | ARGS="--trials 100 --datasets mulran_riverside02"]
+# Build output goes to build/bench_global_localization_build.log so stdout holds only the JSON lines.
+bench-global-localization: setup
+	@log=$(ROOT)/build/bench_global_localization_build.log; mkdir -p $(ROOT)/build; \
+	  bash $(ROOT)/tools/build.sh >$$log 2>&1 || { tail -40 $$log; exit 1; }
+	@$(SETUP) python3 $(ROOT)/bench/bench_global_localization.py $(ARGS)
+
 # ---------------------------------------------------------------- block maps
 .PHONY: bench-blocks
 bench-blocks: build

@@ -15,19 +15,50 @@
 #include "grid_puzzle_localization/point_cloud.hpp"
 #include "grid_puzzle_localization/pose_covariance.hpp"
 #include "grid_puzzle_localization/pose_prediction.hpp"
+#include "grid_puzzle_localization/pose_search.hpp"
 #include "grid_puzzle_localization/preprocess.hpp"
 
 namespace grid_puzzle_localization {
 
-/// Re-acquisition after a loss: once `after_rejections` scans in a row had their match rejected, each
-/// further scan is also matched from `candidates_per_scan` guesses on a grid of `step` around the
-/// prediction (map-frame x y offsets up to `radius`, nearest first, cycling over scans); the best
-/// acceptable match (highest NVTL) is taken.
-struct RecoveryConfig {
-  int after_rejections = 3;     ///< >= 0; 0 disables re-acquisition (the localizer coasts on the prediction)
-  double radius = 4.0;          ///< [m] >= 0, largest offset tried
-  double step = 2.0;            ///< [m] > 0, grid spacing of the offsets
-  int candidates_per_scan = 4;  ///< >= 1; each costs one more alignment while lost
+/// The gate a match must pass to be used as the pose.
+struct MatchConfig {
+  /// NVTL >= this (dimensionless, the mean best-voxel likelihood; 0 disables the check) ...
+  double min_nvtl = 0.5;
+  /// ... and transformation probability >= this (dimensionless; 0 disables the check) ...
+  double min_transformation_probability = 0.0;
+  /// ... and, when true, NDT converged (a match that hit max_iterations is rejected).
+  bool require_converged = false;
+
+  std::string validate() const;
+};
+
+struct ImuConfig {
+  bool use_gyro = true;   ///< use gyro samples for the rotation prediction when they cover the interval
+  double max_gap = 0.05;  ///< [s] >= 0, samples may end this far short of a scan and still cover it
+
+  std::string validate() const;
+};
+
+/// Extra matches tried when the match from the prediction is poor (fails the gate, or its NVTL is below
+/// poor_nvtl_ratio times the last accepted one's), never when it is good: the last accepted pose and, when
+/// the rotation is uncertain (no gyro), yaw offsets +-k * yaw_step (k = 1..yaw_count) around it and around
+/// the prediction. They are screened by the NDT cost (cheap), the best `refine` are aligned, and the best
+/// acceptable one by NVTL is kept; when it is still poor the bounded search runs too.
+struct HypothesesConfig {
+  /// [rad] > 0; NDT converges from about 0.05-0.1 rad of yaw error at 1 m voxels (tens of metres of range
+  /// turn the points by metres), so the offsets are that fine and screened rather than all aligned.
+  double yaw_step = 0.05;
+  int yaw_count = 12;            ///< >= 0
+  int refine = 4;                ///< >= 1, alignments run
+  double poor_nvtl_ratio = 0.9;  ///< [0, 1]; 0 = only a match failing the gate is poor
+
+  std::string validate() const;
+};
+
+/// After the last accepted match the localizer publishes its bounded prediction for at most
+/// max_coast_time [s] > 0; after that LocalizerOutput::publish is false until a match is accepted again.
+struct LostConfig {
+  double max_coast_time = 2.0;
 
   std::string validate() const;
 };
@@ -45,22 +76,14 @@ struct LocalizerConfig {
   }();
   CovarianceConfig covariance;
   int map_update_threads = 1;  ///< OpenMP threads of background target updates (0 = all cores)
-  /// A match is accepted only when NVTL >= min_nvtl (dimensionless, the mean best-voxel likelihood;
-  /// 0 disables the check) ...
-  double min_nvtl = 0.5;
-  /// ... and transformation probability >= this (dimensionless; 0 disables the check) ...
-  double min_transformation_probability = 0.0;
-  /// ... and, when true, NDT converged (a match that hit max_iterations is rejected).
-  bool require_converged = false;
-  /// [s] >= 0: time constant of the low-pass filter on the twist that deskews scans. The twist is the
-  /// difference of two matched poses, and each matched pose depends on the twist its scan was deskewed
-  /// with: unfiltered (0), that loop is marginally stable and the speed oscillates scan to scan.
-  double deskew_twist_smoothing = 0.15;
-  bool use_gyro = true;         ///< use gyro samples for the rotation prediction when they cover the interval
-  double gyro_max_gap = 0.05;   ///< [s] samples may end this far short of a scan and still cover it
+  MatchConfig match;
+  ImuConfig imu;
+  PredictionConfig prediction;
+  HypothesesConfig hypotheses;
+  SearchConfig search;
+  LostConfig lost;
   double time_jump_back = 0.5;  ///< [s] a scan this much older than the last one resets the localizer
   bool output_aligned = false;  ///< fill LocalizerOutput::aligned (costs a copy per scan)
-  RecoveryConfig recovery;
 
   /// Empty when usable, else every bad value with its allowed range (includes the nested configs).
   std::string validate() const;
@@ -76,19 +99,29 @@ struct LocalizerOutput {
   bool map_update_pending = false;  ///< a target update was queued or in progress when the scan started
   /// Valid when state == kTracking: map_T_base at the scan stamp, always finite.
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-  /// The prediction the match started from (map_T_base); the initial pose on the first scan after one.
+  /// The prediction the match started from (map_T_base): the constant-velocity one while it is trusted,
+  /// else the last accepted pose (rotated by the gyro when it covers the interval).
   Eigen::Isometry3d prediction = Eigen::Isometry3d::Identity();
-  Twist twist = Twist::Zero();             ///< body twist (base frame) [m/s, rad/s]
-  Matrix6d covariance = Matrix6d::Zero();  ///< of (x y z roll pitch yaw) [m^2, rad^2]
-  /// Of the twist: 2 * covariance / dt^2 for two independent poses dt apart; the max-std diagonal when the
-  /// twist is not measured (first scan after an initial pose, or a prediction).
+  Twist twist = Twist::Zero();  ///< body twist (base frame) [m/s, rad/s]
+  /// Of the pose, in ROS's order and frames: x y z in the map frame, then rotation about the map's fixed
+  /// X Y Z axes (a perturbation R' = exp(dtheta) R) [m^2, rad^2]. Grows with the time since the last
+  /// accepted match while the prediction is published.
+  Matrix6d covariance = Matrix6d::Zero();
+  /// Of the body twist (base frame): 2 * (pose covariance in the base frame) / dt^2 for two independent poses
+  /// dt apart; the max-std diagonal when the twist is not measured.
   Matrix6d twist_covariance = Matrix6d::Zero();
   bool match_accepted = false;  ///< false: pose is the prediction
-  /// This scan came after recovery.after_rejections rejected matches in a row: re-acquisition was tried.
+  /// No match was accepted on this scan, after the hypotheses and the search: the pose is not measured.
   bool lost = false;
-  int recovery_candidates = 0;  ///< extra alignments tried for re-acquisition on this scan
-  bool reacquired = false;      ///< one of them was accepted: the pose jumped to it (not motion)
-  NdtResult ndt;                ///< the match (status INVALID_INPUT when no match was tried)
+  /// The pose may be published: a match was accepted, or the last accepted one is at most
+  /// lost.max_coast_time old.
+  bool publish = false;
+  double since_last_match = 0.0;  ///< [s] time since the last accepted match (0 when this one is)
+  int hypotheses = 0;             ///< extra alignments from the hypotheses on this scan
+  int search_candidates = 0;      ///< poses screened by the search on this scan (0: no search)
+  bool search_ambiguous = false;  ///< the search found an acceptable pose but refused it as ambiguous
+  bool recovered = false;         ///< accepted after lost.max_coast_time without a match
+  NdtResult ndt;                  ///< the match (status INVALID_INPUT when no match was tried)
   PreprocessReport preprocess;
   double align_ms = 0.0;  ///< NDT only
   double scan_ms = 0.0;   ///< whole processScan, including preprocessing and the swap
@@ -125,11 +158,21 @@ class Localizer {
   /// Forgets the motion and the pose (the map stays); the default initial pose, if any, is re-armed.
   void reset();
 
+  /// Searches `region` (map frame) for the pose of the last scan given to processScan (its preprocessed
+  /// points) and, when an acceptable unambiguous pose is found, makes it the pose to start from at the next
+  /// scan. Scan thread only. With no scan or no map yet the result is empty.
+  SearchResult globalLocalize(const SearchRegion& region);
+  /// The x y z extent of the current target's Gaussians (voxel means); empty without a map.
+  std::optional<Eigen::AlignedBox3d> mapBounds() const;
+  /// The pose of the last accepted match, if any since the last reset.
+  std::optional<Eigen::Isometry3d> lastAcceptedPose() const;
+
  private:
   bool acceptable(const NdtResult& r) const;
-  /// Matches from the next recovery guesses around `guess` (their number in `tries`); the best acceptable
-  /// result, if any.
-  std::optional<NdtResult> reacquire(const Eigen::Isometry3d& guess, int tries);
+  /// The best acceptable match among the hypotheses: `held` (the last accepted pose) and yaw offsets around
+  /// `guess` (the prediction) when the rotation is not known.
+  std::optional<NdtResult> tryHypotheses(const Eigen::Isometry3d& guess, const Eigen::Isometry3d& held,
+                                         bool rotation_known, LocalizerOutput& out);
   /// The predicted sensor motion over the sweep [stamp + t_begin, stamp + t_end]; gyro rotation when covered.
   SweepMotion sweepMotion(double stamp, double t_begin, double t_end, const Eigen::Isometry3d& base_T_sensor,
                           bool fresh) const;
@@ -145,9 +188,10 @@ class Localizer {
   std::optional<Eigen::Isometry3d> pending_initial_pose_;
   std::optional<Eigen::Isometry3d> default_initial_pose_;
   std::optional<double> last_stamp_;
-  int rejected_in_a_row_ = 0;
-  std::vector<Eigen::Vector3d> recovery_offsets_;  // map frame, nearest first
-  std::size_t next_recovery_offset_ = 0;
+  MotionBounds motion_seen_;                     // fastest accepted motion since the initial pose
+  Matrix6d last_covariance_ = Matrix6d::Zero();  // of the last accepted match (ROS order)
+  double reference_nvtl_ = 0.0;                  // of the last accepted match
+  bool have_source_ = false;                     // source_ holds the last scan (for globalLocalize)
 };
 
 }  // namespace grid_puzzle_localization

@@ -3,6 +3,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
 #include <string>
 
 namespace grid_puzzle_localization {
@@ -26,6 +27,16 @@ struct CovarianceConfig {
 /// curvature is not positive (degenerate scene, failed match) get the max std projected on them; non-finite input gives
 /// the max-std diagonal. The result is symmetric, positive definite and finite.
 Matrix6d covarianceFromHessian(const Matrix6d& hessian, const CovarianceConfig& config);
+
+/// `cov` of (x y z roll pitch yaw) in the NDT's parametrisation T = t * Rx(roll) Ry(pitch) Rz(yaw), at the
+/// angles `roll` and `pitch` of the pose, -> ROS's order and frame: (x y z, rotation about the fixed X Y Z
+/// axes of the parent frame), the perturbation R' = exp([dtheta]x) R, by the first-order map
+/// dtheta = dR R^T = roll' X + pitch' Rx(roll) Y + yaw' Rx(roll) Ry(pitch) Z.
+Matrix6d fixedAxisCovariance(const Matrix6d& cov, double roll, double pitch);
+
+/// A pose covariance in the parent frame (ROS order, translation and rotation perturbations about the
+/// parent's axes) expressed in the body frame of the pose with rotation `parent_R_body`.
+Matrix6d bodyFrameCovariance(const Matrix6d& cov, const Eigen::Matrix3d& parent_R_body);
 
 /// Covariance to report with a prediction (no accepted match): the max-std diagonal, an honest
 /// statement that the pose was not measured.

@@ -4,6 +4,9 @@
 
 #include <Eigen/Geometry>
 #include <deque>
+#include <string>
+
+#include "grid_puzzle_localization/pose_search.hpp"
 
 namespace grid_puzzle_localization {
 
@@ -63,6 +66,8 @@ class PosePredictor {
   /// The twist low-pass filtered with time constant `smoothing` [s] (see update); the first twist measured
   /// after a reset is taken as is. Zero after a reset.
   const Twist& smoothedTwist() const { return smoothed_twist_; }
+  /// A twist has been measured (two poses recorded) since the last reset.
+  bool twistMeasured() const { return twist_measured_; }
 
   /// Pose at `stamp` [s]: the last pose moved by the constant body twist. When `gyro_rotation` is
   /// given it replaces the rotation part of the motion (the translation still follows the twist).
@@ -81,5 +86,39 @@ class PosePredictor {
   Twist smoothed_twist_ = Twist::Zero();
   bool twist_measured_ = false;  ///< a twist has been measured since the reset
 };
+
+/// How far the constant-velocity prediction is trusted, and where to search when it is not.
+struct PredictionConfig {
+  /// [s] > 0: past this time since the last accepted match the velocity is no longer extrapolated (a gap, a
+  /// stop, a loss); the pose is searched around the last accepted one instead.
+  double max_extrapolation = 1.0;
+  /// [m/s] > 0: speed bound before a speed has been measured (the first scans after an initial pose).
+  double max_speed = 15.0;
+  /// [rad/s] > 0: yaw-rate bound before one has been measured, when no gyro covers the interval. Each 0.1 rad
+  /// of yaw range multiplies the search's candidates; a hand-held sensor without IMU may need 1.5.
+  double max_yaw_rate = 0.5;
+  /// >= 1: the highest speed and yaw rate measured since the initial pose are multiplied by this.
+  double margin = 1.5;
+  double min_radius = 1.0;     ///< [m] >= 0, search radius at zero elapsed time
+  double max_radius = 30.0;    ///< [m] >= min_radius
+  double min_yaw_range = 0.0;  ///< [rad] >= 0, yaw searched at least this far when rotation is uncertain
+
+  std::string validate() const;
+};
+
+/// The fastest motion measured so far (speed [m/s], yaw rate [rad/s]); unset before the first measurement.
+struct MotionBounds {
+  bool measured = false;
+  double speed = 0.0;
+  double yaw_rate = 0.0;
+  void add(const Twist& twist);
+};
+
+/// The region to search `elapsed` [s] after the last accepted pose `last`: a disc of radius
+/// min_radius + speed_bound * elapsed (at most max_radius) and, when `rotation_known` is false (no gyro),
+/// yaws within min_yaw_range + yaw_rate_bound * elapsed (at most pi); the bounds are margin times the
+/// fastest motion seen, or max_speed / max_yaw_rate before any was measured.
+SearchRegion boundedSearchRegion(const Eigen::Isometry3d& last, double elapsed, const MotionBounds& seen,
+                                 bool rotation_known, const PredictionConfig& config);
 
 }  // namespace grid_puzzle_localization

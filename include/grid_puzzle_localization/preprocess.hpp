@@ -19,6 +19,10 @@ struct PreprocessConfig {
   /// Move the points of a scan that carries per-point times to the scan stamp (after the range crop, before
   /// the voxel filter, so the robot body is still cropped and voxels average deskewed points).
   bool deskew = true;
+  /// [s] >= 0: time constant of the low-pass filter on the twist that deskews scans (used by the localizer).
+  /// The twist is the difference of two matched poses, and each matched pose depends on the twist its scan was
+  /// deskewed with: unfiltered (0), that loop is marginally stable and the speed oscillates scan to scan.
+  double deskew_twist_smoothing = 0.15;
 
   /// Returns an empty string when the values are usable, otherwise a message naming the bad value.
   std::string validate() const;

@@ -37,42 +37,61 @@ Eigen::Isometry3d toIsometry(const Eigen::Matrix4f& m) {
   return out;
 }
 
-// Grid offsets (x y, map frame) with 0 < |offset| <= radius, nearest first.
-std::vector<Eigen::Vector3d> recoveryOffsets(const RecoveryConfig& c) {
-  std::vector<Eigen::Vector3d> out;
-  const int n = static_cast<int>(std::floor(c.radius / c.step));
-  for (int i = -n; i <= n; ++i)
-    for (int j = -n; j <= n; ++j) {
-      const Eigen::Vector3d o(i * c.step, j * c.step, 0.0);
-      if ((i != 0 || j != 0) && o.norm() <= c.radius + 1e-9) out.push_back(o);
+// The pose covariance of an accepted match, in ROS's order and frame.
+Matrix6d matchCovariance(const NdtResult& r, const CovarianceConfig& config) {
+  const Vector6d p = matrixToPose(r.transform.cast<double>());
+  return fixedAxisCovariance(covarianceFromHessian(r.hessian, config), p(3), p(4));
+}
+
+// The covariance of a prediction `elapsed` after a match with covariance `last`: that one plus the search
+// region's extent (radius on x y z, yaw range on the rotations), at most the max-std diagonal.
+Matrix6d coastingCovariance(const Matrix6d& last, const SearchRegion& region, const CovarianceConfig& config) {
+  Matrix6d cov = last;
+  for (int i = 0; i < 3; ++i) cov(i, i) += region.radius * region.radius;
+  for (int i = 3; i < 6; ++i) cov(i, i) += region.yaw_range * region.yaw_range;
+  const Matrix6d max = predictionCovariance(config);
+  for (int i = 0; i < 6; ++i)
+    if (cov(i, i) > max(i, i)) {
+      const double s = std::sqrt(max(i, i) / cov(i, i));
+      cov.row(i) *= s;
+      cov.col(i) *= s;
     }
-  std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.norm() < b.norm(); });
-  return out;
+  return cov;
 }
 
 }  // namespace
 
-std::string RecoveryConfig::validate() const {
+std::string MatchConfig::validate() const {
   std::ostringstream err;
-  if (!(after_rejections >= 0))
-    err << "recovery/after_rejections must be >= 0, 0 = off (got " << after_rejections << "); ";
-  if (!(radius >= 0.0)) err << "recovery/radius must be >= 0 m (got " << radius << "); ";
-  if (!(step > 0.0)) err << "recovery/step must be > 0 m (got " << step << "); ";
-  if (!(candidates_per_scan >= 1))
-    err << "recovery/candidates_per_scan must be >= 1 (got " << candidates_per_scan << "); ";
+  if (!(min_nvtl >= 0.0)) err << "match/min_nvtl must be >= 0 (got " << min_nvtl << "); ";
+  if (!(min_transformation_probability >= 0.0))
+    err << "match/min_transformation_probability must be >= 0 (got " << min_transformation_probability << "); ";
   return err.str();
+}
+
+std::string ImuConfig::validate() const {
+  return max_gap >= 0.0 ? "" : "imu/max_gap must be >= 0 s (got " + std::to_string(max_gap) + "); ";
+}
+
+std::string HypothesesConfig::validate() const {
+  std::ostringstream err;
+  if (!(yaw_step > 0.0)) err << "hypotheses/yaw_step must be > 0 rad (got " << yaw_step << "); ";
+  if (!(yaw_count >= 0)) err << "hypotheses/yaw_count must be >= 0 (got " << yaw_count << "); ";
+  if (!(refine >= 1)) err << "hypotheses/refine must be >= 1 (got " << refine << "); ";
+  if (!(poor_nvtl_ratio >= 0.0 && poor_nvtl_ratio <= 1.0))
+    err << "hypotheses/poor_nvtl_ratio must be in [0, 1] (got " << poor_nvtl_ratio << "); ";
+  return err.str();
+}
+
+std::string LostConfig::validate() const {
+  return max_coast_time > 0.0 ? "" : "lost/max_coast_time must be > 0 s (got " + std::to_string(max_coast_time) + "); ";
 }
 
 std::string LocalizerConfig::validate() const {
   std::ostringstream err;
-  err << preprocess.validate() << ndt.validate() << covariance.validate() << recovery.validate();
+  err << preprocess.validate() << ndt.validate() << covariance.validate() << match.validate() << imu.validate()
+      << prediction.validate() << hypotheses.validate() << search.validate() << lost.validate();
   if (!(map_update_threads >= 0)) err << "map_update_threads must be >= 0 (0 = all cores); ";
-  if (!(min_nvtl >= 0.0)) err << "min_nvtl must be >= 0 (got " << min_nvtl << "); ";
-  if (!(min_transformation_probability >= 0.0))
-    err << "min_transformation_probability must be >= 0 (got " << min_transformation_probability << "); ";
-  if (!(deskew_twist_smoothing >= 0.0))
-    err << "preprocess/deskew_twist_smoothing must be >= 0 s (got " << deskew_twist_smoothing << "); ";
-  if (!(gyro_max_gap >= 0.0)) err << "gyro_max_gap must be >= 0 s (got " << gyro_max_gap << "); ";
   if (!(time_jump_back > 0.0)) err << "time_jump_back must be > 0 s (got " << time_jump_back << "); ";
   return err.str();
 }
@@ -93,8 +112,7 @@ Localizer::Localizer(const LocalizerConfig& config)
     : config_(validated(config)),
       preprocessor_(config.preprocess),
       aligner_(config.ndt),
-      worker_(workerParams(config)),
-      recovery_offsets_(recoveryOffsets(config.recovery)) {}
+      worker_(workerParams(config)) {}
 
 void Localizer::setInitialPose(const Eigen::Isometry3d& map_T_base) { pending_initial_pose_ = map_T_base; }
 
@@ -112,15 +130,52 @@ void Localizer::reset() {
   gyro_.clear();
   pending_initial_pose_ = default_initial_pose_;
   last_stamp_.reset();
-  rejected_in_a_row_ = 0;
+  motion_seen_ = MotionBounds();
 }
 
-std::optional<NdtResult> Localizer::reacquire(const Eigen::Isometry3d& guess, int tries) {
+std::optional<Eigen::AlignedBox3d> Localizer::mapBounds() const {
+  if (!target_ || target_->gaussianCount() == 0) return std::nullopt;
+  Eigen::AlignedBox3d box;
+  target_->forEach([&](const VoxelKey&, const VoxelStats&, const auto& gaussian) {
+    if (gaussian.valid) box.extend(gaussian.mean.template cast<double>());
+  });
+  return box;
+}
+
+std::optional<Eigen::Isometry3d> Localizer::lastAcceptedPose() const {
+  if (!predictor_.initialized()) return std::nullopt;
+  return predictor_.pose();
+}
+
+SearchResult Localizer::globalLocalize(const SearchRegion& region) {
+  if (!target_ || target_->gaussianCount() == 0 || !have_source_) return {};
+  SearchResult r = searchPose(aligner_, *target_, source_, region, config_.search,
+                              [this](const NdtResult& m) { return acceptable(m); });
+  if (r.best) setInitialPose(toIsometry(r.best->transform));
+  return r;
+}
+
+std::optional<NdtResult> Localizer::tryHypotheses(const Eigen::Isometry3d& guess, const Eigen::Isometry3d& held,
+                                                  bool rotation_known, LocalizerOutput& out) {
+  // Yaw offsets around the prediction and around the last accepted pose (a swing that reverses lands between
+  // them), screened by the NDT cost; the best few are aligned. With a known rotation: the last pose only.
+  SearchRegion around;
+  around.yaw_range = rotation_known ? 0.0 : config_.hypotheses.yaw_step * config_.hypotheses.yaw_count;
+  SearchConfig screen;
+  screen.yaw_step = config_.hypotheses.yaw_step;
+  screen.screen_points = config_.search.screen_points;
+  screen.refine = config_.hypotheses.refine;
+  std::vector<Eigen::Isometry3d> guesses;
+  for (const Eigen::Isometry3d* centre : {&held, &guess}) {
+    if (rotation_known && centre == &guess) continue;
+    around.centre = *centre;
+    for (const Eigen::Isometry3d& g : searchCandidates(around, screen))
+      if (!g.isApprox(guess, 1e-9)) guesses.push_back(g);  // the prediction itself was matched already
+  }
   std::optional<NdtResult> best;
-  for (int k = 0; k < tries; ++k) {
-    Eigen::Isometry3d candidate = guess;
-    candidate.translation() += recovery_offsets_[next_recovery_offset_++ % recovery_offsets_.size()];
-    NdtResult r = aligner_.align(*target_, source_, candidate.cast<float>());
+  for (const Eigen::Isometry3d& g : screenCandidates(aligner_, *target_, source_, guesses, screen)) {
+    NdtResult r = aligner_.align(*target_, source_, g.cast<float>());
+    ++out.hypotheses;
     if (acceptable(r) && (!best || r.nvtl > best->nvtl)) best = std::move(r);
   }
   return best;
@@ -128,9 +183,9 @@ std::optional<NdtResult> Localizer::reacquire(const Eigen::Isometry3d& guess, in
 
 bool Localizer::acceptable(const NdtResult& r) const {
   if (r.status != NdtResultStatus::OK && r.status != NdtResultStatus::MAX_ITERATIONS) return false;
-  if (config_.require_converged && !r.converged) return false;
-  if (r.nvtl < config_.min_nvtl) return false;
-  if (r.transformation_probability < config_.min_transformation_probability) return false;
+  if (config_.match.require_converged && !r.converged) return false;
+  if (r.nvtl < config_.match.min_nvtl) return false;
+  if (r.transformation_probability < config_.match.min_transformation_probability) return false;
   return r.transform.allFinite();
 }
 
@@ -138,7 +193,7 @@ SweepMotion Localizer::sweepMotion(double stamp, double t_begin, double t_end, c
                                    bool fresh) const {
   // Right after an initial pose there is no motion estimate: the scan is taken as if the sensor stood still.
   const Twist twist = fresh ? Twist::Zero() : predictor_.smoothedTwist();
-  if (fresh || !config_.use_gyro || !gyro_.covers(stamp + t_begin, stamp + t_end, config_.gyro_max_gap))
+  if (fresh || !config_.imu.use_gyro || !gyro_.covers(stamp + t_begin, stamp + t_end, config_.imu.max_gap))
     return SweepMotion::fromTwist(twist, base_T_sensor, t_begin, t_end);
   auto rotation = [&](double t) {
     return t >= 0.0 ? gyro_.integrate(stamp, stamp + t) : gyro_.integrate(stamp + t, stamp).inverse();
@@ -182,67 +237,114 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   if (fresh) {
     predictor_.reset(*pending_initial_pose_, stamp);
     pending_initial_pose_.reset();
-    rejected_in_a_row_ = 0;
+    motion_seen_ = MotionBounds();
+    last_covariance_ = predictionCovariance(config_.covariance);
+    reference_nvtl_ = 0.0;
   }
   if (!predictor_.initialized()) {
+    // Kept (not deskewed: no motion is known) for a global search started while waiting.
+    preprocessor_.apply(scan, source_, &out.preprocess);
+    const Eigen::Isometry3f base_T_sensor_f = base_T_sensor.cast<float>();
+    for (Point& p : source_) p = base_T_sensor_f * p;
+    have_source_ = true;
     out.state = LocalizerState::kWaitingForInitialPose;
     out.scan_ms = msSince(start);
     return out;
   }
   out.state = LocalizerState::kTracking;
+  // The predictor holds the last accepted pose. Its velocity is extrapolated only when it was measured and
+  // the last match is recent; else the pose is searched around the last accepted one.
+  const double elapsed = stamp - predictor_.stamp();
+  const bool velocity_trusted =
+      predictor_.twistMeasured() && elapsed >= 0.0 && elapsed <= config_.prediction.max_extrapolation;
 
   if (config_.preprocess.deskew && times && times->size() == scan.size()) {
     const auto [t_begin, t_end] = timeSpan(*times);
-    const SweepMotion motion = sweepMotion(stamp, t_begin, t_end, base_T_sensor, fresh);
+    const SweepMotion motion = sweepMotion(stamp, t_begin, t_end, base_T_sensor, fresh || !velocity_trusted);
     preprocessor_.apply(scan, source_, &out.preprocess, times, &motion);
   } else {
     preprocessor_.apply(scan, source_, &out.preprocess);
   }
   const Eigen::Isometry3f base_T_sensor_f = base_T_sensor.cast<float>();
   for (Point& p : source_) p = base_T_sensor_f * p;
+  have_source_ = true;
 
-  Eigen::Isometry3d guess = predictor_.pose();
-  if (!fresh) {
-    std::optional<Eigen::Quaterniond> gyro_rotation;
-    if (config_.use_gyro && gyro_.covers(predictor_.stamp(), stamp, config_.gyro_max_gap))
-      gyro_rotation = gyro_.integrate(predictor_.stamp(), stamp);
-    guess = predictor_.predict(stamp, gyro_rotation ? &*gyro_rotation : nullptr);
-  }
+  std::optional<Eigen::Quaterniond> gyro_rotation;
+  if (!fresh && config_.imu.use_gyro && gyro_.covers(predictor_.stamp(), stamp, config_.imu.max_gap))
+    gyro_rotation = gyro_.integrate(predictor_.stamp(), stamp);
+  const bool rotation_known = gyro_rotation.has_value();
+  // The last accepted pose, turned by the gyro when it covers the time since.
+  Eigen::Isometry3d held = predictor_.pose();
+  if (gyro_rotation) held.linear() = predictor_.pose().linear() * gyro_rotation->toRotationMatrix();
+  const Eigen::Isometry3d guess =
+      velocity_trusted ? predictor_.predict(stamp, gyro_rotation ? &*gyro_rotation : nullptr) : held;
+  const SearchRegion region =
+      boundedSearchRegion(held, fresh ? 0.0 : elapsed, motion_seen_, rotation_known, config_.prediction);
 
   out.prediction = guess;
   const Clock::time_point align_start = Clock::now();
-  out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
-  out.match_accepted = acceptable(out.ndt);
-  out.lost = config_.recovery.after_rejections > 0 && rejected_in_a_row_ >= config_.recovery.after_rejections;
-  if (!out.match_accepted && out.lost) {
-    out.recovery_candidates =
-        std::min<int>(config_.recovery.candidates_per_scan, static_cast<int>(recovery_offsets_.size()));
-    if (std::optional<NdtResult> found = reacquire(guess, out.recovery_candidates)) {
-      out.ndt = std::move(*found);
-      out.match_accepted = out.reacquired = true;
-    }
+  bool searched = false;
+  // A match is poor when it fails the gate or scores well below the last accepted one (a false minimum
+  // can pass an absolute gate): then the hypotheses and, failing them, the search get a chance.
+  auto poor = [&](const NdtResult& r) {
+    return !acceptable(r) || r.nvtl < config_.hypotheses.poor_nvtl_ratio * reference_nvtl_;
+  };
+  std::optional<NdtResult> best;
+  auto consider = [&](std::optional<NdtResult> r) {
+    if (r && acceptable(*r) && (!best || r->nvtl > best->nvtl)) best = std::move(r);
+  };
+  if (velocity_trusted) {
+    out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
+    consider(out.ndt);
+    if (poor(out.ndt)) consider(tryHypotheses(guess, held, rotation_known, out));
   }
-  out.pose = out.match_accepted ? toIsometry(out.ndt.transform) : guess;
-  out.align_ms = msSince(align_start);  // with the re-acquisition attempts
-  if (!out.pose.matrix().allFinite()) {
+  if (!best || poor(*best)) {
+    // No trusted velocity (start-up, a gap) or the hypotheses did not help: search the bounded region.
+    SearchResult found = searchPose(aligner_, *target_, source_, region, config_.search,
+                                    [this](const NdtResult& m) { return acceptable(m); });
+    searched = true;
+    out.search_candidates = found.candidates;
+    out.search_ambiguous = found.ambiguous;
+    consider(std::move(found.best));
+    // The search saw a better fit than the best kept but could not tell it from another: nothing is sure.
+    if (found.ambiguous && best && found.best_nvtl > best->nvtl) best.reset();
+  }
+  if (best) {
+    out.ndt = std::move(*best);
+    out.match_accepted = true;
+  }
+  out.align_ms = msSince(align_start);  // with the hypotheses and the search
+  if (out.match_accepted) {
+    out.pose = toIsometry(out.ndt.transform);
+    if (!out.pose.matrix().allFinite()) out.match_accepted = false;
+  }
+  out.lost = !out.match_accepted;
+  if (out.match_accepted) {
+    out.recovered = !fresh && elapsed > config_.lost.max_coast_time;
+    out.since_last_match = 0.0;
+    // A jump found by the search after the velocity stopped being trusted is a correction, not a motion
+    // to extrapolate: the velocity is measured again from the next match.
+    if (fresh || (searched && !velocity_trusted && elapsed > config_.prediction.max_extrapolation))
+      predictor_.reset(out.pose, stamp);
+    else
+      predictor_.update(out.pose, stamp, config_.preprocess.deskew_twist_smoothing);
+    if (predictor_.twistMeasured()) motion_seen_.add(predictor_.twist());
+    out.covariance = last_covariance_ = matchCovariance(out.ndt, config_.covariance);
+    reference_nvtl_ = out.ndt.nvtl;
+    out.twist_covariance = predictor_.twistMeasured() && elapsed > 0.0
+                               ? bodyFrameCovariance(out.covariance, out.pose.rotation()) * (2.0 / (elapsed * elapsed))
+                               : predictionCovariance(config_.covariance);
+  } else {
+    // The bounded prediction: extrapolated while the velocity is trusted, else held at the last pose.
     out.pose = guess;
-    out.match_accepted = false;
+    out.since_last_match = elapsed;
+    out.covariance = coastingCovariance(last_covariance_, region, config_.covariance);
+    out.twist_covariance = predictionCovariance(config_.covariance);
   }
-  rejected_in_a_row_ = out.match_accepted ? 0 : rejected_in_a_row_ + 1;
-  const double dt = stamp - predictor_.stamp();
-  // After a new initial pose or a re-acquisition the match may move far from the guess: that jump is a
-  // correction, not motion.
-  if (fresh || out.reacquired)
-    predictor_.reset(out.pose, stamp);
-  else
-    predictor_.update(out.pose, stamp, config_.deskew_twist_smoothing);
-  gyro_.dropBefore(stamp);
+  out.publish = out.match_accepted || out.since_last_match <= config_.lost.max_coast_time;
   out.twist = predictor_.twist();
-  out.covariance = out.match_accepted ? covarianceFromHessian(out.ndt.hessian, config_.covariance)
-                                      : predictionCovariance(config_.covariance);
-  out.twist_covariance = out.match_accepted && !fresh && !out.reacquired && dt > 0.0
-                             ? out.covariance * (2.0 / (dt * dt))
-                             : predictionCovariance(config_.covariance);
+  // Samples since the last accepted pose are kept while they can still serve a prediction from it.
+  gyro_.dropBefore(std::max(predictor_.stamp(), stamp - config_.prediction.max_extrapolation));
   if (config_.output_aligned) {
     const Eigen::Isometry3f map_T_base = out.pose.cast<float>();
     out.aligned.reserve(source_.size());

@@ -58,4 +58,23 @@ Matrix6d covarianceFromHessian(const Matrix6d& hessian, const CovarianceConfig& 
   return cov;
 }
 
+Matrix6d fixedAxisCovariance(const Matrix6d& cov, double roll, double pitch) {
+  const Eigen::Matrix3d rx = Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  const Eigen::Matrix3d ry = Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  Matrix6d j = Matrix6d::Identity();
+  j.block<3, 1>(3, 3) = Eigen::Vector3d::UnitX();
+  j.block<3, 1>(3, 4) = rx * Eigen::Vector3d::UnitY();
+  j.block<3, 1>(3, 5) = rx * ry * Eigen::Vector3d::UnitZ();
+  const Matrix6d out = j * cov * j.transpose();
+  return 0.5 * (out + out.transpose());
+}
+
+Matrix6d bodyFrameCovariance(const Matrix6d& cov, const Eigen::Matrix3d& parent_R_body) {
+  Matrix6d r = Matrix6d::Zero();
+  r.topLeftCorner<3, 3>() = parent_R_body.transpose();
+  r.bottomRightCorner<3, 3>() = parent_R_body.transpose();
+  const Matrix6d out = r * cov * r.transpose();
+  return 0.5 * (out + out.transpose());
+}
+
 }  // namespace grid_puzzle_localization

@@ -1,6 +1,8 @@
 #include "grid_puzzle_localization/pose_prediction.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <sstream>
 
 namespace grid_puzzle_localization {
 namespace {
@@ -128,6 +130,39 @@ void PosePredictor::update(const Eigen::Isometry3d& pose, double stamp, double s
   }
   pose_ = pose;
   stamp_ = stamp;
+}
+
+std::string PredictionConfig::validate() const {
+  std::ostringstream err;
+  if (!(max_extrapolation > 0.0))
+    err << "prediction/max_extrapolation must be > 0 s (got " << max_extrapolation << "); ";
+  if (!(max_speed > 0.0)) err << "prediction/max_speed must be > 0 m/s (got " << max_speed << "); ";
+  if (!(max_yaw_rate > 0.0)) err << "prediction/max_yaw_rate must be > 0 rad/s (got " << max_yaw_rate << "); ";
+  if (!(margin >= 1.0)) err << "prediction/margin must be >= 1 (got " << margin << "); ";
+  if (!(min_radius >= 0.0)) err << "prediction/min_radius must be >= 0 m (got " << min_radius << "); ";
+  if (!(max_radius >= min_radius))
+    err << "prediction/max_radius must be >= prediction/min_radius (got " << max_radius << "); ";
+  if (!(min_yaw_range >= 0.0)) err << "prediction/min_yaw_range must be >= 0 rad (got " << min_yaw_range << "); ";
+  return err.str();
+}
+
+void MotionBounds::add(const Twist& twist) {
+  if (!twist.allFinite()) return;
+  speed = std::max(measured ? speed : 0.0, twist.head<3>().norm());
+  yaw_rate = std::max(measured ? yaw_rate : 0.0, std::abs(twist(5)));
+  measured = true;
+}
+
+SearchRegion boundedSearchRegion(const Eigen::Isometry3d& last, double elapsed, const MotionBounds& seen,
+                                 bool rotation_known, const PredictionConfig& config) {
+  const double t = std::max(0.0, elapsed);
+  const double speed = seen.measured ? config.margin * seen.speed : config.max_speed;
+  const double yaw_rate = seen.measured ? config.margin * seen.yaw_rate : config.max_yaw_rate;
+  SearchRegion r;
+  r.centre = last;
+  r.radius = std::min(config.max_radius, config.min_radius + speed * t);
+  r.yaw_range = rotation_known ? 0.0 : std::min(M_PI, config.min_yaw_range + yaw_rate * t);
+  return r;
 }
 
 }  // namespace grid_puzzle_localization

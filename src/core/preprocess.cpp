@@ -11,6 +11,8 @@ std::string PreprocessConfig::validate() const {
   if (!(min_range >= 0.0)) err << "min_range must be >= 0 m (got " << min_range << "); ";
   if (!(max_range > min_range)) err << "max_range must be > min_range (got " << max_range << " m); ";
   if (!(voxel_size >= 0.0)) err << "voxel_size must be >= 0 m, 0 disables it (got " << voxel_size << "); ";
+  if (!(deskew_twist_smoothing >= 0.0))
+    err << "deskew_twist_smoothing must be >= 0 s (got " << deskew_twist_smoothing << "); ";
   return err.str();
 }
 

@@ -21,6 +21,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "storage": ("commands.storage", "storage overhead of global map, tiles, blocks and submaps"),
     "monitor": ("commands.monitor", "Sample CPU (percent of one core) and memory of ROS nodes or PIDs."),
     "experiment": ("commands.experiment", "Run the localizer per map mode on a bag, monitor it, and report."),
+    "global-localize": (
+        "commands.global_localize",
+        "find a scan's pose on a map (tiles, PCD or blocks) without an initial guess; prints JSON",
+    ),
     "report": ("commands.report", "Rebuild summary.json, report.md and plots of an experiment directory."),
 }
 

@@ -1,11 +1,11 @@
 #include "localizer_params.hpp"
 
-#include <ros/console.h>
-
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
 #include <vector>
+
+#include "grid_puzzle_localization/rpy.hpp"
 
 namespace grid_puzzle_localization {
 namespace {
@@ -17,8 +17,8 @@ std::string text(const T& v) {
   return s.str();
 }
 
-// Reads one parameter into `field`; if the whole config no longer validates, the default is kept.
-// The config validates before each call, so a new problem is this parameter's.
+// Reads one parameter into `field` and checks the whole config: the config validates before each call, so
+// a new problem is this parameter's, and it stops the start-up with the parameter, its value and range.
 class CheckedLoader {
  public:
   CheckedLoader(const ros::NodeHandle& pnh, LocalizerConfig& config, std::string log_name)
@@ -28,14 +28,12 @@ class CheckedLoader {
   void operator()(const std::string& name, T& field) {
     T value;
     if (!pnh_.getParam(name, value)) return;
-    const T fallback = field;
     field = value;
     std::string problem = config_.validate();
     if (problem.empty()) return;
     while (!problem.empty() && (problem.back() == ' ' || problem.back() == ';')) problem.pop_back();
-    field = fallback;
-    ROS_WARN("%s: parameter ~%s = %s is out of range (%s); using the default %s instead", log_name_.c_str(),
-             name.c_str(), text(value).c_str(), problem.c_str(), text(fallback).c_str());
+    throw std::invalid_argument("parameter ~" + name + " = " + text(value) + " is out of range (" + problem +
+                                "); fix it in the launch file or YAML of " + log_name_);
   }
 
  private:
@@ -55,11 +53,25 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
   load("preprocess/min_range", c.preprocess.min_range);
   load("preprocess/voxel_size", c.preprocess.voxel_size);
   load("preprocess/deskew", c.preprocess.deskew);
-  load("preprocess/deskew_twist_smoothing", c.deskew_twist_smoothing);
-  load("recovery/after_rejections", c.recovery.after_rejections);
-  load("recovery/radius", c.recovery.radius);
-  load("recovery/step", c.recovery.step);
-  load("recovery/candidates_per_scan", c.recovery.candidates_per_scan);
+  load("preprocess/deskew_twist_smoothing", c.preprocess.deskew_twist_smoothing);
+  load("prediction/max_extrapolation", c.prediction.max_extrapolation);
+  load("prediction/max_speed", c.prediction.max_speed);
+  load("prediction/max_yaw_rate", c.prediction.max_yaw_rate);
+  load("prediction/margin", c.prediction.margin);
+  load("prediction/max_radius", c.prediction.max_radius);  // max before min, as for the ranges
+  load("prediction/min_radius", c.prediction.min_radius);
+  load("prediction/min_yaw_range", c.prediction.min_yaw_range);
+  load("hypotheses/yaw_step", c.hypotheses.yaw_step);
+  load("hypotheses/yaw_count", c.hypotheses.yaw_count);
+  load("hypotheses/refine", c.hypotheses.refine);
+  load("hypotheses/poor_nvtl_ratio", c.hypotheses.poor_nvtl_ratio);
+  load("search/step", c.search.step);
+  load("search/yaw_step", c.search.yaw_step);
+  load("search/max_candidates", c.search.max_candidates);
+  load("search/screen_points", c.search.screen_points);
+  load("search/refine", c.search.refine);
+  load("search/ambiguity_ratio", c.search.ambiguity_ratio);
+  load("lost/max_coast_time", c.lost.max_coast_time);
   pnh.param("preprocess/time_field", p.time_field, p.time_field);
   load("ndt/resolution", c.ndt.resolution);
   load("ndt/min_points_per_voxel", c.ndt.min_points_per_voxel);
@@ -75,16 +87,16 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
     throw std::invalid_argument("~ndt/search_method '" + search +
                                 "' is unknown; use DIRECT1, DIRECT7, DIRECT27 or RADIUS");
   load("map_update_threads", c.map_update_threads);
-  load("match/min_nvtl", c.min_nvtl);
-  load("match/min_transformation_probability", c.min_transformation_probability);
-  load("match/require_converged", c.require_converged);
+  load("match/min_nvtl", c.match.min_nvtl);
+  load("match/min_transformation_probability", c.match.min_transformation_probability);
+  load("match/require_converged", c.match.require_converged);
   load("covariance/scale", c.covariance.scale);
   load("covariance/min_translation_std", c.covariance.min_translation_std);
   load("covariance/min_rotation_std", c.covariance.min_rotation_std);
   load("covariance/max_translation_std", c.covariance.max_translation_std);
   load("covariance/max_rotation_std", c.covariance.max_rotation_std);
-  load("imu/use_gyro", c.use_gyro);
-  load("imu/max_gap", c.gyro_max_gap);
+  load("imu/use_gyro", c.imu.use_gyro);
+  load("imu/max_gap", c.imu.max_gap);
   load("time_jump_back", c.time_jump_back);
 
   pnh.getParam("map_source", p.map_source);
@@ -107,13 +119,26 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
     for (double v : pose) finite = finite && std::isfinite(v);
     if (!finite)
       throw std::invalid_argument("~initial_pose must be 6 finite numbers [x y z roll pitch yaw] (m, rad) or []");
-    Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
-    t.translation() << pose[0], pose[1], pose[2];
-    t.linear() =
-        (Eigen::AngleAxisd(pose[5], Eigen::Vector3d::UnitZ()) * Eigen::AngleAxisd(pose[4], Eigen::Vector3d::UnitY()) *
-         Eigen::AngleAxisd(pose[3], Eigen::Vector3d::UnitX()))
-            .toRotationMatrix();
-    p.initial_pose = t;
+    p.initial_pose = poseFromXyzRpy(XyzRpy(pose.data()));
+  }
+
+  GlobalLocalizationParams& g = p.global_localization;
+  pnh.getParam("global_localization/auto_start_timeout", g.auto_start_timeout);
+  if (!(g.auto_start_timeout >= 0.0))
+    throw std::invalid_argument("~global_localization/auto_start_timeout must be >= 0 s, 0 = off (got " +
+                                text(g.auto_start_timeout) + ")");
+  pnh.getParam("global_localization/size", g.size);
+  if (!(g.size > 0.0))
+    throw std::invalid_argument("~global_localization/size must be > 0 m (got " + text(g.size) + ")");
+  pnh.getParam("global_localization/yaw_range", g.yaw_range);
+  if (!(g.yaw_range > 0.0 && g.yaw_range <= M_PI))
+    throw std::invalid_argument("~global_localization/yaw_range must be in (0, pi] rad (got " + text(g.yaw_range) +
+                                ")");
+  std::vector<double> centre;
+  if (pnh.getParam("global_localization/center", centre) && !centre.empty()) {
+    if (centre.size() != 2 || !std::isfinite(centre[0]) || !std::isfinite(centre[1]))
+      throw std::invalid_argument("~global_localization/center must be [x, y] (m, map frame) or []");
+    g.center = Eigen::Vector2d(centre[0], centre[1]);
   }
   return p;
 }

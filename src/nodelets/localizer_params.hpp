@@ -1,16 +1,26 @@
-// ROS parameters of the NDT localizer nodelet -> core LocalizerConfig. Defaults live in the core structs;
-// a value that does not validate is replaced by the default and logged.
+// ROS parameters of the NDT localizer nodelet -> core LocalizerConfig. Defaults live in the core structs
+// (and, for the ROS-only ones, below); a value out of range stops the start-up with an error naming it.
 #pragma once
 
 #include <ros/node_handle.h>
 
 #include <Eigen/Geometry>
+#include <cmath>
 #include <optional>
 #include <string>
 
 #include "grid_puzzle_localization/localizer.hpp"
 
 namespace grid_puzzle_localization {
+
+/// Global localization by search (~global_localize and the automatic start).
+struct GlobalLocalizationParams {
+  /// [s] >= 0: with no initial pose this long after the first scan, search by itself (0 = never).
+  double auto_start_timeout = 0.0;
+  std::optional<Eigen::Vector2d> center;  ///< [m] coarse position; unset: a hint on initialpose_hint, else the map
+  double size = 40.0;                     ///< [m] > 0, side of the square searched
+  double yaw_range = M_PI;                ///< [rad] in (0, pi], half-width of the yaw range searched
+};
 
 struct LocalizerRosParams {
   LocalizerConfig core;
@@ -25,11 +35,12 @@ struct LocalizerRosParams {
   std::optional<Eigen::Isometry3d> initial_pose;        ///< from ~initial_pose [x y z roll pitch yaw]
   /// Per-point time field of the scans: FLOAT32/FLOAT64 [s] or UINT32 [ns] after header.stamp.
   std::string time_field = "time";
+  GlobalLocalizationParams global_localization;
 };
 
-/// Reads every parameter from `pnh`. Bad values of numeric parameters fall back to the default with a
-/// warning naming the parameter; unusable ones (unknown map_source or search method, pcd mode without a
-/// file, malformed initial_pose) throw std::invalid_argument with a message that says what to fix.
+/// Reads every parameter from `pnh`. A value out of range or unusable (unknown map_source or search method,
+/// pcd mode without a file, malformed initial_pose) throws std::invalid_argument with a message that names the
+/// parameter and says what to fix.
 LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::string& log_name);
 
 }  // namespace grid_puzzle_localization

@@ -17,8 +17,10 @@
 #include <optional>
 #include <pluginlib/class_list_macros.hpp>
 
+#include "grid_puzzle_localization/GlobalLocalize.h"
 #include "grid_puzzle_localization/TileDelta.h"
 #include "grid_puzzle_localization/localizer.hpp"
+#include "grid_puzzle_localization/rpy.hpp"
 #include "grid_puzzle_localization/tile_delta_sequence.hpp"
 #include "localizer_params.hpp"
 #include "ndt_status_msg.hpp"
@@ -61,6 +63,8 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     points_sub_ = nh.subscribe("points", 2, &NdtLocalizerNodelet::onPoints, this);
     initial_pose_sub_ = nh.subscribe("initialpose", 1, &NdtLocalizerNodelet::onInitialPose, this);
     imu_sub_ = nh.subscribe("imu", 200, &NdtLocalizerNodelet::onImu, this);
+    hint_sub_ = nh.subscribe("initialpose_hint", 1, &NdtLocalizerNodelet::onHint, this);
+    global_srv_ = pnh.advertiseService("global_localize", &NdtLocalizerNodelet::onGlobalLocalize, this);
     NODELET_INFO("%s: map source '%s', frames %s -> %s, resolution %.2f m, search %s", getName().c_str(),
                  params_.map_source.c_str(), params_.map_frame.c_str(), params_.base_frame.c_str(),
                  params_.core.ndt.resolution, toString(params_.core.ndt.search));
@@ -160,22 +164,79 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
         localizer_->processScan(msg->header.stamp.toSec(), scan, *base_T_sensor, times ? &*times : nullptr);
     if (out.reset) NODELET_WARN("scan time went backwards (bag loop?): localizer reset");
     reportState(out.state);
+    if (out.state == LocalizerState::kWaitingForInitialPose) maybeStartGlobalLocalization(msg->header.stamp);
     if (out.state != LocalizerState::kTracking) return;
-    if (out.reacquired)
-      NODELET_WARN(
-          "re-acquired the map after %d or more rejected matches (best of %d guesses up to %.1f m around "
-          "the prediction)",
-          params_.core.recovery.after_rejections, out.recovery_candidates, params_.core.recovery.radius);
-    else if (out.lost && out.match_accepted)
-      NODELET_WARN("matching again after %d or more rejected matches", params_.core.recovery.after_rejections);
-    else if (out.lost)
-      NODELET_WARN_THROTTLE(2.0, "lost: matches keep being rejected; searching up to %.1f m around the prediction",
-                            params_.core.recovery.radius);
-    if (!out.match_accepted)
-      NODELET_WARN_THROTTLE(2.0, "poor match (%s, NVTL %.2f, TP %.2f, %d iterations): publishing the prediction",
-                            toString(out.ndt.status), out.ndt.nvtl, out.ndt.transformation_probability,
-                            out.ndt.iterations);
+    if (out.recovered)
+      NODELET_WARN("recovered: matching again after %.1f s without an accepted match", since_last_match_);
+    if (out.lost)
+      NODELET_WARN_THROTTLE(2.0, "lost: no acceptable match for %.1f s (NVTL %.2f%s); %s", out.since_last_match,
+                            out.ndt.nvtl, out.search_ambiguous ? ", search ambiguous" : "",
+                            out.publish ? "publishing the bounded prediction"
+                                        : "not publishing odometry or TF (lost/max_coast_time exceeded)");
+    since_last_match_ = out.since_last_match;
     publish(out, msg->header);
+  }
+
+  // Starts a global search once when no initial pose came within global_localization/auto_start_timeout.
+  void maybeStartGlobalLocalization(const ros::Time& stamp) {
+    const GlobalLocalizationParams& g = params_.global_localization;
+    if (g.auto_start_timeout <= 0.0) return;
+    if (waiting_since_.isZero()) waiting_since_ = stamp;
+    if ((stamp - waiting_since_).toSec() < g.auto_start_timeout) return;
+    GlobalLocalize::Request req;
+    GlobalLocalize::Response res;
+    const std::optional<Eigen::Vector2d> centre = hint_ ? hint_ : g.center;
+    if (centre) {
+      req.use_center = true;
+      req.center_x = centre->x();
+      req.center_y = centre->y();
+    }
+    onGlobalLocalize(req, res);
+    if (!res.success) waiting_since_ = stamp;  // try again after another timeout
+  }
+
+  void onHint(const geometry_msgs::PoseWithCovarianceStamped::ConstPtr& msg) {
+    if (!checkMapFrame(msg->header.frame_id, "initialpose_hint")) return;
+    const Eigen::Vector2d xy(msg->pose.pose.position.x, msg->pose.pose.position.y);
+    if (xy.allFinite()) hint_ = xy;
+  }
+
+  // The search region of a request: see srv/GlobalLocalize.srv.
+  bool onGlobalLocalize(GlobalLocalize::Request& req, GlobalLocalize::Response& res) {
+    const GlobalLocalizationParams& g = params_.global_localization;
+    SearchRegion region;
+    const double size = req.size > 0.0 ? req.size : g.size;
+    region.radius = 0.5 * size * std::sqrt(2.0);  // the disc around the square
+    region.yaw_range = req.yaw_range > 0.0 ? std::min<double>(req.yaw_range, M_PI) : g.yaw_range;
+    if (req.use_center) {
+      region.centre = poseFromXyzRpy((XyzRpy() << req.center_x, req.center_y, 0.0, 0.0, 0.0, req.yaw).finished());
+    } else if (const std::optional<Eigen::Isometry3d> last = localizer_->lastAcceptedPose()) {
+      region.centre = *last;
+    } else if (const std::optional<Eigen::AlignedBox3d> box = localizer_->mapBounds()) {
+      region.centre.translation() = box->center();
+      region.radius = 0.5 * box->sizes().head<2>().norm();
+    } else {
+      res.message = "no map loaded yet";
+      return true;
+    }
+    const SearchResult r = localizer_->globalLocalize(region);
+    res.candidates = static_cast<std::uint32_t>(r.candidates);
+    res.score = r.best_nvtl;
+    res.runner_up_score = r.runner_up_nvtl;
+    res.success = r.best.has_value();
+    if (r.best) {
+      Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+      pose.matrix() = r.best->transform.cast<double>();
+      res.pose = tf2::toMsg(pose);
+      NODELET_INFO("global localization: (%.2f, %.2f) NVTL %.2f, runner-up %.2f, %d candidates", pose.translation().x(),
+                   pose.translation().y(), r.best_nvtl, r.runner_up_nvtl, r.candidates);
+    } else {
+      res.message = r.candidates == 0 ? "no scan received yet"
+                    : r.ambiguous     ? "ambiguous: another pose fits nearly as well; give a smaller area"
+                                      : "no acceptable match in the area";
+      NODELET_WARN("global localization failed: %s", res.message.c_str());
+    }
+    return true;
   }
 
   void reportState(LocalizerState state) {
@@ -207,6 +268,10 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
 
   // --------------------------------------------------------------- output
   void publish(const LocalizerOutput& out, const std_msgs::Header& scan_header) {
+    std_msgs::Header status_header = scan_header;
+    status_header.frame_id = params_.map_frame;
+    status_pub_.publish(toStatusMsg(out, status_header, localizer_->map().stats().update_ms, params_.map_source));
+    if (!out.publish) return;  // lost for longer than lost/max_coast_time: no pose rather than a wrong one
     nav_msgs::Odometry odom;
     odom.header.stamp = scan_header.stamp;
     odom.header.frame_id = params_.map_frame;
@@ -220,10 +285,6 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       }
     odom_pub_.publish(odom);
     if (params_.publish_tf) publishTf(out.pose, scan_header.stamp);
-
-    std_msgs::Header status_header = scan_header;
-    status_header.frame_id = params_.map_frame;
-    status_pub_.publish(toStatusMsg(out, status_header, localizer_->map().stats().update_ms, params_.map_source));
 
     if (params_.publish_aligned_points && aligned_pub_.getNumSubscribers() > 0) {
       std_msgs::Header h = scan_header;
@@ -267,8 +328,12 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   TileDeltaSequence tile_sequence_;                        // tile_delta callback only (never concurrent)
   std::optional<LocalizerState> last_state_;               // for logging each state change once
   bool odom_published_by_others_ = false;
+  double since_last_match_ = 0.0;        // of the previous scan, for the recovery message
+  ros::Time waiting_since_;              // first scan without an initial pose (automatic start)
+  std::optional<Eigen::Vector2d> hint_;  // last initialpose_hint (map frame)
   ros::Publisher odom_pub_, status_pub_, aligned_pub_;
-  ros::Subscriber points_sub_, initial_pose_sub_, imu_sub_, map_sub_;
+  ros::Subscriber points_sub_, initial_pose_sub_, imu_sub_, map_sub_, hint_sub_;
+  ros::ServiceServer global_srv_;
   ros::ServiceClient resend_client_;
 };
 

@@ -20,7 +20,11 @@ NdtStatus toStatusMsg(const LocalizerOutput& out, const std_msgs::Header& header
   msg.source_points = static_cast<std::uint32_t>(out.ndt.source_points);
   msg.map_source = map_source;
   msg.lost = out.lost;
-  msg.recovery_candidates = static_cast<std::uint32_t>(out.recovery_candidates);
+  msg.published = out.publish;
+  msg.since_last_match = out.since_last_match;
+  msg.hypotheses = static_cast<std::uint32_t>(out.hypotheses);
+  msg.search_candidates = static_cast<std::uint32_t>(out.search_candidates);
+  msg.search_ambiguous = out.search_ambiguous;
   return msg;
 }
 

@@ -11,6 +11,7 @@
 #include "grid_puzzle_localization/ndt.hpp"
 #include "grid_puzzle_localization/pcd_reader.hpp"
 #include "grid_puzzle_localization/preprocess.hpp"
+#include "grid_puzzle_localization/rpy.hpp"
 
 namespace gpl = grid_puzzle_localization;
 
@@ -20,12 +21,14 @@ const char* kUsage =
     "usage: ndt_align TARGET.pcd SOURCE.pcd [--method DIRECT1|DIRECT7|DIRECT27|RADIUS] [--threads N]\n"
     "                 [--resolution R] [--voxel V] [--max-iterations N] [--epsilon E] [--step-size S]\n"
     "                 [--guess x y z roll pitch yaw]\n"
-    "Aligns SOURCE to TARGET (both x y z PCD files), prints T_target_source and diagnostics as JSON.\n"
+    "Aligns SOURCE to TARGET (both x y z PCD files), prints T_target_source (4x4 and as\n"
+    "pose [x y z roll pitch yaw], ROS convention) and diagnostics as JSON.\n"
     "  --method      neighbour search (default DIRECT7)\n"
     "  --threads     OpenMP threads, 0 = all cores (default 0)\n"
     "  --resolution  NDT voxel size [m] (default 1.0)\n"
     "  --voxel       downsampling leaf [m] for both clouds after dropping (0,0,0) points; 0 = off (default 0.1)\n"
-    "  --guess       initial T_target_source: metres and radians, T = t * Rx(roll) * Ry(pitch) * Rz(yaw)\n";
+    "  --guess       initial T_target_source: metres and radians, ROS's fixed-axis roll pitch yaw,\n"
+    "                T = t * Rz(yaw) * Ry(pitch) * Rx(roll)\n";
 
 struct UsageError : std::runtime_error {
   using std::runtime_error::runtime_error;
@@ -55,7 +58,7 @@ struct Args {
   std::string target, source;
   gpl::NdtConfig config;
   double voxel = 0.1;
-  gpl::Vector6d guess = gpl::Vector6d::Zero();
+  gpl::XyzRpy guess = gpl::XyzRpy::Zero();
 };
 
 Args parse(int argc, char** argv) {
@@ -136,7 +139,7 @@ int main(int argc, char** argv) {
     const double build_ms = msSince(t0);
     const gpl::NdtAligner aligner(a.config);
     t0 = std::chrono::steady_clock::now();
-    const gpl::NdtResult r = aligner.align(*snapshot, source, gpl::poseToMatrix(a.guess).cast<float>());
+    const gpl::NdtResult r = aligner.align(*snapshot, source, gpl::poseFromXyzRpy(a.guess).cast<float>());
     const double align_ms = msSince(t0);
     std::ostringstream js;
     js.precision(9);
@@ -146,6 +149,9 @@ int main(int argc, char** argv) {
       for (int j = 0; j < 4; ++j) js << (j ? ", " : "") << r.transform(i, j);
       js << "]";
     }
+    const gpl::XyzRpy pose = gpl::xyzRpyFromPose(Eigen::Isometry3d(r.transform.cast<double>()));
+    js << "], \"pose\": [";
+    for (int i = 0; i < 6; ++i) js << (i ? ", " : "") << pose(i);
     js << "], \"iterations\": " << r.iterations << ", \"converged\": " << (r.converged ? "true" : "false")
        << ", \"status\": \"" << gpl::toString(r.status) << "\", \"score\": " << r.score
        << ", \"transformation_probability\": " << r.transformation_probability << ", \"nvtl\": " << r.nvtl

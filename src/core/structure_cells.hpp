@@ -1,0 +1,40 @@
+// Private helper of GlobalLocalizer: the ground height of x-y cells and the structure (walls, poles, trunks) standing
+// above it, the same way for the map and for a scan so that their heights compare.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <unordered_map>
+#include <vector>
+
+namespace grid_puzzle_localization {
+
+/// Key of the x-y cell (x, y) (cell indices, not metres).
+inline std::int64_t cellKey(std::int64_t x, std::int64_t y) { return (x << 32) ^ (y & 0xffffffffLL); }
+
+/// The lowest z of the points in each x-y cell of edge `cell` [m].
+class GroundCells {
+ public:
+  GroundCells(const std::vector<Eigen::Vector3d>& points, double cell);
+  /// Lowest z of the cell holding (x, y) (which must hold a point given to the constructor).
+  double lowest(double x, double y) const;
+  /// Median of the lowest z of the cells whose centre lies within `radius` of (x, y); false when there is none.
+  bool heightNear(double x, double y, double radius, double* height) const;
+
+ private:
+  std::int64_t keyOf(double x, double y) const;
+  double cell_;
+  std::unordered_map<std::int64_t, double> lowest_;
+};
+
+/// A point of the structure: x-y [m] and height above the ground of its cell [m].
+struct StructurePoint {
+  Eigen::Vector2d xy;
+  double height;
+};
+
+/// The points standing between `min_height` and `max_height` above the lowest point of their cell.
+std::vector<StructurePoint> structurePoints(const std::vector<Eigen::Vector3d>& points, const GroundCells& ground,
+                                            double min_height, double max_height);
+
+}  // namespace grid_puzzle_localization

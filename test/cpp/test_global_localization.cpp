@@ -1,0 +1,287 @@
+// Global localization: the pyramid bound, the branch and bound against exhaustive search, and GlobalLocalizer on
+// synthetic worlds with known poses.
+#include <gtest/gtest.h>
+
+#include <random>
+#include <string>
+
+#include "grid_puzzle_localization/bbs_search.hpp"
+#include "grid_puzzle_localization/global_localization.hpp"
+#include "synthetic_world.hpp"
+
+namespace gpl = grid_puzzle_localization;
+using gpl::test::makeWorld;
+using gpl::test::poseXYYaw;
+using gpl::test::rotationError;
+using gpl::test::scanFrom;
+using gpl::test::translationError;
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+std::vector<std::uint8_t> randomGrid(int w, int h, std::mt19937& rng) {
+  std::uniform_int_distribution<int> value(0, 255), coin(0, 9);
+  std::vector<std::uint8_t> g(static_cast<std::size_t>(w) * h);
+  for (auto& v : g) v = coin(rng) < 3 ? static_cast<std::uint8_t>(value(rng)) : 0;
+  return g;
+}
+
+std::vector<Eigen::Vector2i> randomCells(int n, int lo, int hi, std::mt19937& rng) {
+  std::uniform_int_distribution<int> c(lo, hi);
+  std::vector<Eigen::Vector2i> cells;
+  for (int i = 0; i < n; ++i) cells.emplace_back(c(rng), c(rng));
+  return cells;
+}
+
+/// Exhaustive search: the best pose over every yaw and offset (ties by betterNode).
+gpl::BbsNode bruteForce(const gpl::BbsProblem& p) {
+  gpl::BbsNode best{0, 0, 0, 0, -1};
+  for (int yaw = 0; yaw < static_cast<int>(p.cells.size()); ++yaw)
+    for (int y = 0; y < p.height; ++y)
+      for (int x = 0; x < p.width; ++x) {
+        const gpl::BbsNode n{yaw, x, y, 0, p.pyramid->score(0, p.cells[static_cast<std::size_t>(yaw)], x, y)};
+        if (best.score < 0 || gpl::betterNode(n, best)) best = n;
+      }
+  return best;
+}
+
+}  // namespace
+
+TEST(LikelihoodPyramid, CoarseLevelIsTheMaxOfTheFineCellsUnderIt) {
+  std::mt19937 rng(11);
+  const int w = 37, h = 29;
+  const std::vector<std::uint8_t> fine = randomGrid(w, h, rng);
+  const gpl::LikelihoodPyramid pyramid(fine, w, h, 4);
+  for (int level = 0; level <= 4; ++level)
+    for (int y = 1 - (1 << level); y < h + 2; ++y)
+      for (int x = 1 - (1 << level); x < w + 2; ++x) {
+        int expected = 0;
+        for (int j = std::max(0, y); j < std::min(h, y + (1 << level)); ++j)
+          for (int i = std::max(0, x); i < std::min(w, x + (1 << level)); ++i)
+            expected = std::max<int>(expected, fine[static_cast<std::size_t>(j) * w + i]);
+        ASSERT_EQ(pyramid.value(level, x, y), expected) << "level " << level << " cell " << x << ", " << y;
+      }
+}
+
+TEST(LikelihoodPyramid, BoundIsAdmissibleOnRandomMaps) {
+  std::mt19937 rng(5);
+  for (int trial = 0; trial < 20; ++trial) {
+    const int w = 40, h = 40, levels = 4;
+    const gpl::LikelihoodPyramid pyramid(randomGrid(w, h, rng), w, h, levels);
+    const std::vector<Eigen::Vector2i> cells = randomCells(25, -5, 30, rng);
+    std::uniform_int_distribution<int> offset(-4, 30);
+    for (int k = 0; k < 50; ++k) {
+      const int level = 1 + k % levels, x = offset(rng), y = offset(rng);
+      const std::int64_t bound = pyramid.score(level, cells, x, y);
+      for (int j = 0; j < (1 << level); ++j)
+        for (int i = 0; i < (1 << level); ++i)
+          ASSERT_GE(bound, pyramid.score(0, cells, x + i, y + j))
+              << "trial " << trial << ": level " << level << " node " << x << ", " << y << " under-bounds pose +" << i
+              << ", +" << j;
+    }
+  }
+}
+
+TEST(BranchAndBound, FindsTheExhaustiveOptimumWithAndWithoutS0OnAnyThreadCount) {
+  std::mt19937 rng(7);
+  for (int trial = 0; trial < 10; ++trial) {
+    const gpl::LikelihoodPyramid pyramid(randomGrid(48, 48, rng), 48, 48, 3);
+    gpl::BbsProblem p;
+    p.pyramid = &pyramid;
+    p.width = 21;
+    p.height = 19;
+    for (int yaw = 0; yaw < 6; ++yaw) p.cells.push_back(randomCells(30, 0, 26, rng));
+    const gpl::BbsNode truth = bruteForce(p);
+    for (int descents : {0, 3})
+      for (int threads : {1, 2, 3}) {
+        const gpl::BbsOutcome out = gpl::branchAndBound(p, 0, 0.9, descents, threads);
+        ASSERT_FALSE(out.leaves.empty());
+        const gpl::BbsNode& best = out.leaves.front();
+        EXPECT_EQ(best.score, truth.score) << "trial " << trial;
+        EXPECT_EQ(std::make_tuple(best.yaw, best.x, best.y), std::make_tuple(truth.yaw, truth.x, truth.y))
+            << "trial " << trial << " descents " << descents << " threads " << threads;
+        for (const gpl::BbsNode& leaf : out.leaves) EXPECT_GE(static_cast<double>(leaf.score), 0.9 * truth.score);
+      }
+  }
+}
+
+TEST(BranchAndBound, LeavesDoNotDependOnTheThreadCount) {
+  std::mt19937 rng(17);
+  const gpl::LikelihoodPyramid pyramid(randomGrid(80, 80, rng), 80, 80, 4);
+  gpl::BbsProblem p;
+  p.pyramid = &pyramid;
+  p.width = p.height = 40;
+  for (int yaw = 0; yaw < 16; ++yaw) p.cells.push_back(randomCells(40, 0, 40, rng));
+  const gpl::BbsOutcome one = gpl::branchAndBound(p, 0, 0.7, 2, 1);
+  for (int threads : {2, 4}) {
+    const gpl::BbsOutcome many = gpl::branchAndBound(p, 0, 0.7, 2, threads);
+    ASSERT_EQ(many.leaves.size(), one.leaves.size()) << threads << " threads";
+    for (std::size_t i = 0; i < one.leaves.size(); ++i)
+      EXPECT_EQ(std::make_tuple(many.leaves[i].yaw, many.leaves[i].x, many.leaves[i].y, many.leaves[i].score),
+                std::make_tuple(one.leaves[i].yaw, one.leaves[i].x, one.leaves[i].y, one.leaves[i].score));
+  }
+}
+
+// A colonnade (posts on a 3 m lattice) with one short wall: every coarse cell looks alike, so a greedy descent from
+// the best coarse candidate settles on a lattice-shifted pose; the branch and bound finds the wall.
+TEST(BranchAndBound, FindsTheTruePoseInRepeatedStructureWhereGreedyDescentFails) {
+  const int side = 160;  // 0.25 m cells
+  std::vector<std::uint8_t> fine(side * side, 0);
+  auto mark = [&](int x, int y) {
+    if (x >= 0 && y >= 0 && x < side && y < side) fine[static_cast<std::size_t>(y) * side + x] = 255;
+  };
+  for (int y = 2; y < side; y += 12)
+    for (int x = 2; x < side; x += 12) mark(x, y);
+  const Eigen::Vector2i wall(87, 70);
+  for (int i = 0; i < 8; ++i) mark(wall.x() + i, wall.y());
+  const gpl::LikelihoodPyramid pyramid(fine, side, side, 5);
+  // The scan: the posts and the wall seen from offset `truth` (cells relative to offset (0, 0)), 4 yaws (the true one
+  // is index 2, the others are 90 degree turns, which the lattice makes look alike).
+  const Eigen::Vector2i truth(43, 37);
+  std::vector<Eigen::Vector2i> seen;
+  for (int y = 2; y < side; y += 12)
+    for (int x = 2; x < side; x += 12)
+      if ((Eigen::Vector2i(x, y) - (truth + Eigen::Vector2i(40, 40))).cast<double>().norm() < 40)
+        seen.push_back(Eigen::Vector2i(x, y) - truth);
+  for (int i = 0; i < 8; ++i) seen.push_back(wall + Eigen::Vector2i(i, 0) - truth);
+  gpl::BbsProblem p;
+  p.pyramid = &pyramid;
+  p.width = p.height = 80;
+  for (int turn : {1, 3, 0, 2}) {
+    std::vector<Eigen::Vector2i> cells;
+    const Eigen::Vector2i centre = wall - truth;
+    for (const Eigen::Vector2i& c : seen) {
+      Eigen::Vector2i d = c - centre;
+      for (int t = 0; t < turn; ++t) d = Eigen::Vector2i(-d.y(), d.x());
+      cells.push_back(centre + d);
+    }
+    p.cells.push_back(cells);
+  }
+  const gpl::BbsNode best = bruteForce(p);
+  ASSERT_EQ(std::make_tuple(best.yaw, best.x, best.y), std::make_tuple(2, truth.x(), truth.y()));
+  const gpl::BbsNode greedy = gpl::greedyDescent(p, gpl::rootNodes(p, 1).front());
+  EXPECT_LT(greedy.score, best.score) << "the scene must defeat a greedy descent to test anything";
+  const gpl::BbsOutcome out = gpl::branchAndBound(p, 0, 0.95, 1, 2);
+  ASSERT_FALSE(out.leaves.empty());
+  EXPECT_EQ(std::make_tuple(out.leaves[0].yaw, out.leaves[0].x, out.leaves[0].y),
+            std::make_tuple(2, truth.x(), truth.y()));
+}
+
+// ---------------------------------------------------------------- GlobalLocalizer on a synthetic yard
+
+class GlobalLocalizerTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() { world_ = new gpl::PointCloud(makeWorld(0.2f, 3)); }
+  static void TearDownTestSuite() { delete world_; }
+  static gpl::GlobalLocalizationConfig config(int threads = 2) {
+    gpl::GlobalLocalizationConfig c;
+    c.threads = threads;
+    c.ndt.threads = threads;
+    return c;
+  }
+  static gpl::GlobalSearchRequest around(double x, double y, double size = 40.0) {
+    gpl::GlobalSearchRequest r;
+    r.center_x = x;
+    r.center_y = y;
+    r.size = size;
+    return r;
+  }
+  static gpl::PointCloud* world_;
+};
+gpl::PointCloud* GlobalLocalizerTest::world_ = nullptr;
+
+TEST_F(GlobalLocalizerTest, FindsAKnownPoseAnywhereInTheSearchSquareAndAnyYaw) {
+  gpl::GlobalLocalizer localizer(config());
+  localizer.setMap(*world_);
+  const Eigen::Isometry3d truth = poseXYYaw(6.3, -4.1, 2.2, 1.8);
+  const gpl::PointCloud scan = scanFrom(*world_, truth, 40.0f, 0.02f, 1);
+  const gpl::GlobalLocalizationResult r = localizer.localize(scan, around(-6.0, 5.0));
+  ASSERT_TRUE(r.found) << r.reason;
+  EXPECT_LT(translationError(r.map_T_base, truth), 0.05);
+  EXPECT_LT(rotationError(r.map_T_base, truth), 0.5 * kPi / 180);
+  EXPECT_GT(r.score, r.runner_up_score);
+  EXPECT_GT(r.confidence, 0.0);
+  EXPECT_GT(r.candidates_evaluated, 0u);
+}
+
+TEST_F(GlobalLocalizerTest, UsesGravityForRollAndPitch) {
+  gpl::GlobalLocalizer localizer(config());
+  localizer.setMap(*world_);
+  Eigen::Isometry3d truth = poseXYYaw(-8.0, 3.0, -1.0, 1.5);
+  const Eigen::Matrix3d tilt =
+      (Eigen::AngleAxisd(0.06, Eigen::Vector3d::UnitY()) * Eigen::AngleAxisd(-0.04, Eigen::Vector3d::UnitX()))
+          .toRotationMatrix();
+  truth.linear() = truth.linear() * tilt;
+  const gpl::PointCloud scan = scanFrom(*world_, truth, 40.0f, 0.02f, 2);
+  const Eigen::Vector3d up_in_base = truth.linear().transpose() * Eigen::Vector3d::UnitZ();
+  const gpl::GlobalLocalizationResult r = localizer.localize(scan, around(0.0, 0.0), up_in_base);
+  ASSERT_TRUE(r.found) << r.reason;
+  EXPECT_LT(translationError(r.map_T_base, truth), 0.05);
+  EXPECT_LT(rotationError(r.map_T_base, truth), 0.5 * kPi / 180);
+}
+
+TEST_F(GlobalLocalizerTest, ResultDoesNotDependOnTheThreadCount) {
+  const Eigen::Isometry3d truth = poseXYYaw(2.0, 7.5, 0.7, 1.8);
+  const gpl::PointCloud scan = scanFrom(*world_, truth, 40.0f, 0.02f, 3);
+  gpl::GlobalLocalizer one(config(1));
+  one.setMap(*world_);
+  const gpl::GlobalLocalizationResult a = one.localize(scan, around(0.0, 0.0));
+  ASSERT_TRUE(a.found) << a.reason;
+  for (int threads : {2, 3}) {
+    gpl::GlobalLocalizer many(config(threads));
+    many.setMap(*world_);
+    const gpl::GlobalLocalizationResult b = many.localize(scan, around(0.0, 0.0));
+    ASSERT_TRUE(b.found) << b.reason;
+    EXPECT_EQ(a.score, b.score) << threads << " threads";
+    EXPECT_EQ(a.runner_up_score, b.runner_up_score) << threads << " threads";
+    EXPECT_LT(translationError(a.map_T_base, b.map_T_base), 1e-4) << threads << " threads";
+    EXPECT_LT(rotationError(a.map_T_base, b.map_T_base), 1e-5) << threads << " threads";
+  }
+}
+
+TEST_F(GlobalLocalizerTest, RefusesBadInputWithAClearReason) {
+  gpl::GlobalLocalizer localizer(config());
+  EXPECT_NE(localizer.localize(gpl::PointCloud(), around(0, 0)).reason.find("no map"), std::string::npos);
+  localizer.setMap(*world_);
+  const gpl::PointCloud scan = scanFrom(*world_, poseXYYaw(0, 0, 0, 1.8), 40.0f, 0.02f, 4);
+
+  const gpl::GlobalLocalizationResult empty = localizer.localize(gpl::PointCloud(), around(0, 0));
+  EXPECT_FALSE(empty.found);
+  EXPECT_NE(empty.reason.find("no finite points"), std::string::npos) << empty.reason;
+
+  const gpl::PointCloud few(scan.begin(), scan.begin() + 20);
+  const gpl::GlobalLocalizationResult sparse = localizer.localize(few, around(0, 0));
+  EXPECT_FALSE(sparse.found);
+  EXPECT_NE(sparse.reason.find("too few points"), std::string::npos) << sparse.reason;
+
+  const gpl::GlobalLocalizationResult off = localizer.localize(scan, around(500.0, -300.0));
+  EXPECT_FALSE(off.found);
+  EXPECT_NE(off.reason.find("no map structure within the scan"), std::string::npos) << off.reason;
+
+  gpl::GlobalSearchRequest bad = around(0, 0);
+  bad.size = -1.0;
+  EXPECT_NE(localizer.localize(scan, bad).reason.find("invalid search request"), std::string::npos);
+
+  gpl::GlobalLocalizationConfig wrong = config();
+  wrong.resolution = 0.0;
+  wrong.max_runner_up_ratio = 1.5;
+  const std::string error = wrong.validate();
+  EXPECT_NE(error.find("resolution"), std::string::npos) << error;
+  EXPECT_NE(error.find("max_runner_up_ratio"), std::string::npos) << error;
+  EXPECT_THROW(gpl::GlobalLocalizer{wrong}, std::invalid_argument);
+}
+
+TEST_F(GlobalLocalizerTest, RefusesAnAmbiguousScene) {
+  // Two identical yards side by side: the scan fits both equally well.
+  gpl::PointCloud twins = *world_;
+  for (const gpl::Point& p : *world_) twins.push_back(p + gpl::Point(70.0f, 0.0f, 0.0f));
+  gpl::GlobalLocalizer localizer(config());
+  localizer.setMap(twins);
+  const gpl::PointCloud scan = scanFrom(*world_, poseXYYaw(4.0, 2.0, 0.3, 1.8), 40.0f, 0.02f, 5);
+  const gpl::GlobalLocalizationResult r = localizer.localize(scan, around(35.0, 0.0, 80.0));
+  EXPECT_FALSE(r.found);
+  EXPECT_NE(r.reason.find("ambiguous"), std::string::npos) << r.reason;
+  EXPECT_GE(r.runner_up_score, 0.9 * r.score);
+  EXPECT_LT(r.confidence, 0.1);
+}

@@ -1,0 +1,113 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "grid_puzzle_localization/pose_prediction.hpp"
+#include "grid_puzzle_localization/pose_search.hpp"
+
+namespace gpl = grid_puzzle_localization;
+
+namespace {
+
+double yawOf(const Eigen::Isometry3d& t) { return std::atan2(t.linear()(1, 0), t.linear()(0, 0)); }
+
+gpl::NdtResult resultAt(double x, double y, double nvtl) {
+  gpl::NdtResult r;
+  r.transform(0, 3) = static_cast<float>(x);
+  r.transform(1, 3) = static_cast<float>(y);
+  r.nvtl = nvtl;
+  r.status = gpl::NdtResultStatus::OK;
+  return r;
+}
+
+}  // namespace
+
+// Before any motion is measured, the radius grows with max_speed; after, with margin times the fastest seen.
+TEST(BoundedSearchRegion, RadiusAndYawGrowLinearlyWithElapsedTimeUpToTheCaps) {
+  gpl::PredictionConfig c;
+  c.max_speed = 15.0;
+  c.max_yaw_rate = 1.5;
+  c.margin = 1.5;
+  c.min_radius = 1.0;
+  c.max_radius = 30.0;
+  c.min_yaw_range = 0.1;
+  gpl::MotionBounds none;
+  gpl::SearchRegion r = gpl::boundedSearchRegion(Eigen::Isometry3d::Identity(), 0.5, none, false, c);
+  EXPECT_DOUBLE_EQ(r.radius, 1.0 + 15.0 * 0.5);
+  EXPECT_DOUBLE_EQ(r.yaw_range, 0.1 + 1.5 * 0.5);
+  gpl::MotionBounds seen;
+  gpl::Twist a = gpl::Twist::Zero(), b = gpl::Twist::Zero();
+  a << 3.0, 4.0, 0.0, 0.0, 0.0, -0.4;  // 5 m/s
+  b << 2.0, 0.0, 0.0, 0.0, 0.0, 0.2;
+  seen.add(a);
+  seen.add(b);
+  EXPECT_DOUBLE_EQ(seen.speed, 5.0);
+  EXPECT_DOUBLE_EQ(seen.yaw_rate, 0.4);
+  r = gpl::boundedSearchRegion(Eigen::Isometry3d::Identity(), 2.0, seen, false, c);
+  EXPECT_DOUBLE_EQ(r.radius, 1.0 + 1.5 * 5.0 * 2.0);
+  EXPECT_DOUBLE_EQ(r.yaw_range, 0.1 + 1.5 * 0.4 * 2.0);
+  r = gpl::boundedSearchRegion(Eigen::Isometry3d::Identity(), 100.0, seen, false, c);
+  EXPECT_DOUBLE_EQ(r.radius, 30.0);
+  EXPECT_DOUBLE_EQ(r.yaw_range, M_PI);
+  // A gyro that covers the interval: the rotation is known, no yaw is searched.
+  r = gpl::boundedSearchRegion(Eigen::Isometry3d::Identity(), 2.0, seen, true, c);
+  EXPECT_DOUBLE_EQ(r.yaw_range, 0.0);
+}
+
+TEST(SearchCandidates, GridInsideTheDiscNearestFirstWithSymmetricYaws) {
+  gpl::SearchRegion region;
+  region.centre.translation() << 10.0, -5.0, 2.0;
+  region.centre.linear() = Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  region.radius = 2.0;
+  region.yaw_range = 0.8;
+  gpl::SearchConfig c;
+  c.step = 1.0;
+  c.yaw_step = 0.35;
+  const auto all = gpl::searchCandidates(region, c);
+  // Lattice points of spacing 1 in a disc of radius 2: 13; yaws 0, +-0.35, +-0.7: 5.
+  ASSERT_EQ(all.size(), 13u * 5u);
+  EXPECT_TRUE(all.front().isApprox(region.centre));
+  double last_distance = 0.0;
+  for (const auto& t : all) {
+    const double d = (t.translation() - region.centre.translation()).norm();
+    EXPECT_LE(d, 2.0 + 1e-9);
+    EXPECT_GE(d, last_distance - 1e-9);
+    last_distance = d;
+    EXPECT_DOUBLE_EQ(t.translation().z(), 2.0);
+    EXPECT_LE(std::abs(yawOf(t) - 0.5), 0.7 + 1e-9);
+  }
+  // A full circle of yaw: 0, +-k step up to pi once.
+  region.yaw_range = M_PI;
+  region.radius = 0.0;
+  EXPECT_EQ(gpl::searchCandidates(region, c).size(), 18u);  // 0, +-0.35 ... +-2.8 (8 pairs), pi
+  // A region too large for the budget is sampled more coarsely, nearest kept.
+  region.radius = 50.0;
+  c.max_candidates = 190;
+  const auto coarse = gpl::searchCandidates(region, c);
+  EXPECT_LE(coarse.size(), 190u);
+  EXPECT_GT(coarse.size(), 100u);
+}
+
+TEST(PickUnambiguous, KeepsTheBestAcceptableAndRefusesADistinctPoseThatScoresAsWell) {
+  gpl::SearchConfig c;
+  c.step = 1.0;
+  c.ambiguity_ratio = 0.9;
+  // The best (2.0) is not acceptable; among the rest 1.5 wins; 1.2 is 5 m away (distinct) but below 0.9 * 1.5.
+  std::vector<gpl::NdtResult> refined{resultAt(0, 0, 2.0), resultAt(1, 1, 1.5), resultAt(1.1, 1, 1.49),
+                                      resultAt(6, 1, 1.2)};
+  gpl::SearchResult r = gpl::pickUnambiguous(refined, {false, true, true, true}, c);
+  ASSERT_TRUE(r.best);
+  EXPECT_DOUBLE_EQ(r.best->nvtl, 1.5);
+  EXPECT_DOUBLE_EQ(r.runner_up_nvtl, 1.2);  // 1.49 is the same pose (0.1 m away), not a runner-up
+  EXPECT_FALSE(r.ambiguous);
+  // A distinct pose at 1.4 >= 0.9 * 1.5: refused.
+  refined.push_back(resultAt(-4, 0, 1.4));
+  r = gpl::pickUnambiguous(refined, {false, true, true, true, true}, c);
+  EXPECT_FALSE(r.best);
+  EXPECT_TRUE(r.ambiguous);
+  EXPECT_DOUBLE_EQ(r.best_nvtl, 1.5);
+  // Nothing acceptable: no answer, not ambiguous.
+  r = gpl::pickUnambiguous(refined, {false, false, false, false, false}, c);
+  EXPECT_FALSE(r.best);
+  EXPECT_FALSE(r.ambiguous);
+}
