@@ -33,7 +33,7 @@ from pathlib import Path
 
 import rosbag
 
-from grid_puzzle_localization.evaluation.tracking import LOST_M, tracking
+from grid_puzzle_localization.evaluation.tracking import LOST_DEG, LOST_M, tracking
 from grid_puzzle_localization.evaluation.trajectory import read_tum
 from grid_puzzle_localization.experiment.scenario import read_scenario
 
@@ -91,8 +91,9 @@ def figures(variant: str, scenario: Path, run: Path) -> list[dict]:
                 "ape_rotation_rmse_deg": (ape.get("rotation_deg") or {}).get("rmse"),
                 "scans_played": track.scans,
                 "scans_with_pose": track.published,
-                f"scans_within_{LOST_M:g}m": track.tracked,
+                f"scans_within_{LOST_M:g}m_{LOST_DEG:g}deg": track.tracked,
                 "translation_max_m": track.translation_max_m,
+                "rotation_max_deg": track.rotation_max_deg,
                 "longest_loss_s": round(track.longest_loss_s, 2),
                 "recovery_after_gaps_s": [None if r is None else round(r, 2) for r in track.recovery_after_gaps_s],
             }

@@ -7,10 +7,11 @@ from grid_puzzle_localization.evaluation.tracking import tracking
 from grid_puzzle_localization.evaluation.trajectory import make_trajectory
 
 
-def trajectory(t, x):
+def trajectory(t, x, yaw_deg=0.0):
     t = np.asarray(t, dtype=float)
     xyz = np.column_stack([x, np.zeros_like(t), np.zeros_like(t)])
-    return make_trajectory(t, xyz, np.tile([0.0, 0.0, 0.0, 1.0], (len(t), 1)))
+    half = np.radians(np.broadcast_to(yaw_deg, t.shape)) / 2
+    return make_trajectory(t, xyz, np.column_stack([0 * t, 0 * t, np.sin(half), np.cos(half)]))
 
 
 def test_losses_and_recoveries_against_hand_counts():
@@ -32,6 +33,17 @@ def test_losses_and_recoveries_against_hand_counts():
     errors = error[published]
     assert got.translation_rmse_m == pytest.approx(np.sqrt(np.mean(errors**2)))
     assert got.translation_max_m == pytest.approx(3.0)
+    assert got.rotation_max_deg == pytest.approx(0.0)
+
+
+def test_a_pose_turned_too_far_is_lost_even_in_the_right_place():
+    stamps = np.arange(0, 5, 0.5)
+    reference = trajectory(stamps, stamps)
+    yaw = np.where(np.arange(10) % 2 == 1, 60.0, 0.0)  # every other pose 60 deg off, positions exact
+    got = tracking(reference, trajectory(stamps, stamps, yaw), stamps, max_diff=0.05)
+    assert got.published == 10 and got.tracked == 5 and got.translation_max_m == 0.0
+    assert got.rotation_max_deg == pytest.approx(60.0)
+    assert got.longest_loss_s == pytest.approx(0.5)
 
 
 def test_never_recovering_after_a_gap_and_lost_until_the_end():
