@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "grid_puzzle_localization/deskew.hpp"
+#include "grid_puzzle_localization/global_localization.hpp"
 #include "grid_puzzle_localization/map_update_worker.hpp"
 #include "grid_puzzle_localization/ndt.hpp"
 #include "grid_puzzle_localization/point_cloud.hpp"
@@ -57,8 +58,12 @@ struct HypothesesConfig {
 
 /// After the last accepted match the localizer publishes its bounded prediction for at most
 /// max_coast_time [s] > 0; after that LocalizerOutput::publish is false until a match is accepted again.
+/// Once the prediction is no longer extrapolated, scans that nothing else matched run the branch-and-bound
+/// global search around the last accepted pose (the bounded region, every yaw when the rotation is not
+/// known), at most once per search_period [s] > 0 of scan time (a search takes about a second).
 struct LostConfig {
   double max_coast_time = 2.0;
+  double search_period = 1.0;
 
   std::string validate() const;
 };
@@ -82,6 +87,13 @@ struct LocalizerConfig {
   HypothesesConfig hypotheses;
   SearchConfig search;
   LostConfig lost;
+  /// The branch-and-bound search of recovery and globalLocalize. Its NDT refinement uses `ndt` above (the
+  /// target is shared) with its own transformation_epsilon; one thread, like the matching.
+  GlobalLocalizationConfig global = [] {
+    GlobalLocalizationConfig c;
+    c.threads = 1;
+    return c;
+  }();
   double time_jump_back = 0.5;  ///< [s] a scan this much older than the last one resets the localizer
   bool output_aligned = false;  ///< fill LocalizerOutput::aligned (costs a copy per scan)
 
@@ -116,12 +128,14 @@ struct LocalizerOutput {
   /// The pose may be published: a match was accepted, or the last accepted one is at most
   /// lost.max_coast_time old.
   bool publish = false;
-  double since_last_match = 0.0;  ///< [s] time since the last accepted match (0 when this one is)
-  int hypotheses = 0;             ///< extra alignments from the hypotheses on this scan
-  int search_candidates = 0;      ///< poses screened by the search on this scan (0: no search)
-  bool search_ambiguous = false;  ///< the search found an acceptable pose but refused it as ambiguous
-  bool recovered = false;         ///< accepted after lost.max_coast_time without a match
-  NdtResult ndt;                  ///< the match (status INVALID_INPUT when no match was tried)
+  double since_last_match = 0.0;     ///< [s] from the last accepted match (or initial pose) before this scan
+  int hypotheses = 0;                ///< extra alignments from the hypotheses on this scan
+  int search_candidates = 0;         ///< poses screened by the search on this scan (0: no search)
+  bool search_ambiguous = false;     ///< the search found an acceptable pose but refused it as ambiguous
+  bool recovered = false;            ///< accepted after lost.max_coast_time without a match
+  bool global_search = false;        ///< the branch-and-bound search ran on this scan
+  std::string global_search_reason;  ///< why its answer was refused (empty when taken or not run)
+  NdtResult ndt;                     ///< the match (status INVALID_INPUT when no match was tried)
   PreprocessReport preprocess;
   double align_ms = 0.0;  ///< NDT only
   double scan_ms = 0.0;   ///< whole processScan, including preprocessing and the swap
@@ -158,10 +172,12 @@ class Localizer {
   /// Forgets the motion and the pose (the map stays); the default initial pose, if any, is re-armed.
   void reset();
 
-  /// Searches `region` (map frame) for the pose of the last scan given to processScan (its preprocessed
-  /// points) and, when an acceptable unambiguous pose is found, makes it the pose to start from at the next
-  /// scan. Scan thread only. With no scan or no map yet the result is empty.
-  SearchResult globalLocalize(const SearchRegion& region);
+  /// Searches `region` (map frame; the square of side 2 * radius, yaws within +-yaw_range, a full circle from pi)
+  /// by branch and bound for the pose of the last scan given to processScan (its preprocessed points) and,
+  /// when an acceptable unambiguous pose is found, makes it the pose at that scan's stamp (the next scans search
+  /// around it, as after a pose without a velocity). Scan thread only. With no scan or no map yet: not found,
+  /// with the reason.
+  GlobalLocalizationResult globalLocalize(const SearchRegion& region);
   /// The x y z extent of the current target's Gaussians (voxel means); empty without a map.
   std::optional<Eigen::AlignedBox3d> mapBounds() const;
   /// The pose of the last accepted match, if any since the last reset.
@@ -169,6 +185,9 @@ class Localizer {
 
  private:
   bool acceptable(const NdtResult& r) const;
+  /// The branch-and-bound search of `region` on the current source and target (the map given to it first
+  /// when the target changed); found only when its refinement also passes the match gate.
+  GlobalLocalizationResult searchGlobally(const SearchRegion& region);
   /// The best acceptable match among the hypotheses: `held` (the last accepted pose) and yaw offsets around
   /// `guess` (the prediction) when the rotation is not known.
   std::optional<NdtResult> tryHypotheses(const Eigen::Isometry3d& guess, const Eigen::Isometry3d& held,
@@ -191,7 +210,10 @@ class Localizer {
   MotionBounds motion_seen_;                     // fastest accepted motion since the initial pose
   Matrix6d last_covariance_ = Matrix6d::Zero();  // of the last accepted match (ROS order)
   double reference_nvtl_ = 0.0;                  // of the last accepted match
-  bool have_source_ = false;                     // source_ holds the last scan (for globalLocalize)
+  std::optional<double> source_stamp_;           // source_ holds the scan of this stamp (for globalLocalize)
+  GlobalLocalizer global_;
+  std::shared_ptr<const VoxelMap> global_target_;  // the target global_ was given (rebuilt when it changes)
+  std::optional<double> last_global_search_;       // scan stamp of the last recovery search
 };
 
 }  // namespace grid_puzzle_localization

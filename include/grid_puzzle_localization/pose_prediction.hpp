@@ -100,7 +100,7 @@ struct PredictionConfig {
   /// >= 1: the highest speed and yaw rate measured since the initial pose are multiplied by this.
   double margin = 1.5;
   double min_radius = 1.0;     ///< [m] >= 0, search radius at zero elapsed time
-  double max_radius = 30.0;    ///< [m] >= min_radius
+  double max_radius = 100.0;   ///< [m] >= min_radius (the global search covers 200 m x 200 m in about a second)
   double min_yaw_range = 0.0;  ///< [rad] >= 0, yaw searched at least this far when rotation is uncertain
 
   std::string validate() const;

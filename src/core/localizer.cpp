@@ -22,6 +22,15 @@ VoxelMapParams workerParams(const LocalizerConfig& config) {
   return p;
 }
 
+// The search's NDT refinement runs on the localizer's target: same voxel parameters and search method.
+GlobalLocalizationConfig globalConfig(const LocalizerConfig& config) {
+  GlobalLocalizationConfig g = config.global;
+  const double epsilon = g.ndt.transformation_epsilon;
+  g.ndt = config.ndt;
+  g.ndt.transformation_epsilon = epsilon;
+  return g;
+}
+
 const LocalizerConfig& validated(const LocalizerConfig& config) {
   const std::string problem = config.validate();
   if (!problem.empty()) throw std::invalid_argument("localizer parameters: " + problem);
@@ -84,13 +93,18 @@ std::string HypothesesConfig::validate() const {
 }
 
 std::string LostConfig::validate() const {
-  return max_coast_time > 0.0 ? "" : "lost/max_coast_time must be > 0 s (got " + std::to_string(max_coast_time) + "); ";
+  std::ostringstream err;
+  if (!(max_coast_time > 0.0)) err << "lost/max_coast_time must be > 0 s (got " << max_coast_time << "); ";
+  if (!(search_period > 0.0)) err << "lost/search_period must be > 0 s (got " << search_period << "); ";
+  return err.str();
 }
 
 std::string LocalizerConfig::validate() const {
   std::ostringstream err;
   err << preprocess.validate() << ndt.validate() << covariance.validate() << match.validate() << imu.validate()
       << prediction.validate() << hypotheses.validate() << search.validate() << lost.validate();
+  const std::string global_problem = globalConfig(*this).validate();
+  if (!global_problem.empty()) err << "global_localization: " << global_problem << "; ";
   if (!(map_update_threads >= 0)) err << "map_update_threads must be >= 0 (0 = all cores); ";
   if (!(time_jump_back > 0.0)) err << "time_jump_back must be > 0 s (got " << time_jump_back << "); ";
   return err.str();
@@ -112,7 +126,8 @@ Localizer::Localizer(const LocalizerConfig& config)
     : config_(validated(config)),
       preprocessor_(config.preprocess),
       aligner_(config.ndt),
-      worker_(workerParams(config)) {}
+      worker_(workerParams(config)),
+      global_(globalConfig(config)) {}
 
 void Localizer::setInitialPose(const Eigen::Isometry3d& map_T_base) { pending_initial_pose_ = map_T_base; }
 
@@ -130,6 +145,7 @@ void Localizer::reset() {
   gyro_.clear();
   pending_initial_pose_ = default_initial_pose_;
   last_stamp_.reset();
+  source_stamp_.reset();
   motion_seen_ = MotionBounds();
 }
 
@@ -147,11 +163,51 @@ std::optional<Eigen::Isometry3d> Localizer::lastAcceptedPose() const {
   return predictor_.pose();
 }
 
-SearchResult Localizer::globalLocalize(const SearchRegion& region) {
-  if (!target_ || target_->gaussianCount() == 0 || !have_source_) return {};
-  SearchResult r = searchPose(aligner_, *target_, source_, region, config_.search,
-                              [this](const NdtResult& m) { return acceptable(m); });
-  if (r.best) setInitialPose(toIsometry(r.best->transform));
+GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
+  GlobalLocalizationResult r;
+  if (!target_ || target_->gaussianCount() == 0) {
+    r.reason = "no map yet";
+    return r;
+  }
+  if (!source_stamp_) {
+    r.reason = "no scan yet";
+    return r;
+  }
+  if (global_target_ != target_) {
+    // The search's map is the target's voxel means (what the localizer holds of the map), refined on the target.
+    PointCloud means;
+    means.reserve(target_->gaussianCount());
+    target_->forEach([&](const VoxelKey&, const VoxelStats&, const VoxelGaussian& g) {
+      if (g.valid) means.push_back(g.mean);
+    });
+    global_.setMap(means, target_);
+    global_target_ = target_;
+  }
+  GlobalSearchRequest request;
+  request.center_x = region.centre.translation().x();
+  request.center_y = region.centre.translation().y();
+  request.size = std::max(2.0 * region.radius, 2.0 * config_.search.step);
+  request.yaw_center = std::atan2(region.centre.linear()(1, 0), region.centre.linear()(0, 0));
+  request.yaw_range = region.yaw_range >= M_PI ? 2.0 * M_PI : 2.0 * region.yaw_range;
+  r = global_.localize(source_, request);
+  if (r.found && !acceptable(r.refinement)) {
+    r.found = false;
+    r.reason = "the refined pose fails the match gate (match/*)";
+  }
+  return r;
+}
+
+GlobalLocalizationResult Localizer::globalLocalize(const SearchRegion& region) {
+  GlobalLocalizationResult r = searchGlobally(region);
+  if (!r.found) return r;
+  // The pose of the last scan, at its stamp: the next scans search around it with a radius that grows with
+  // the time since (the vehicle may move while the search runs), as after any pose without a velocity.
+  pending_initial_pose_.reset();
+  predictor_.reset(r.map_T_base, *source_stamp_);
+  motion_seen_ = MotionBounds();
+  last_covariance_ = matchCovariance(r.refinement, config_.covariance);
+  reference_nvtl_ = r.refinement.nvtl;
+  last_global_search_.reset();
   return r;
 }
 
@@ -240,13 +296,14 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     motion_seen_ = MotionBounds();
     last_covariance_ = predictionCovariance(config_.covariance);
     reference_nvtl_ = 0.0;
+    last_global_search_.reset();
   }
   if (!predictor_.initialized()) {
     // Kept (not deskewed: no motion is known) for a global search started while waiting.
     preprocessor_.apply(scan, source_, &out.preprocess);
     const Eigen::Isometry3f base_T_sensor_f = base_T_sensor.cast<float>();
     for (Point& p : source_) p = base_T_sensor_f * p;
-    have_source_ = true;
+    source_stamp_ = stamp;
     out.state = LocalizerState::kWaitingForInitialPose;
     out.scan_ms = msSince(start);
     return out;
@@ -267,7 +324,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   }
   const Eigen::Isometry3f base_T_sensor_f = base_T_sensor.cast<float>();
   for (Point& p : source_) p = base_T_sensor_f * p;
-  have_source_ = true;
+  source_stamp_ = stamp;
 
   std::optional<Eigen::Quaterniond> gyro_rotation;
   if (!fresh && config_.imu.use_gyro && gyro_.covers(predictor_.stamp(), stamp, config_.imu.max_gap))
@@ -283,7 +340,6 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
 
   out.prediction = guess;
   const Clock::time_point align_start = Clock::now();
-  bool searched = false;
   // A match is poor when it fails the gate or scores well below the last accepted one (a false minimum
   // can pass an absolute gate): then the hypotheses and, failing them, the search get a chance.
   auto poor = [&](const NdtResult& r) {
@@ -298,16 +354,34 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     consider(out.ndt);
     if (poor(out.ndt)) consider(tryHypotheses(guess, held, rotation_known, out));
   }
-  if (!best || poor(*best)) {
-    // No trusted velocity (start-up, a gap) or the hypotheses did not help: search the bounded region.
+  // Past max_extrapolation (a gap, a loss) the region is large: the branch-and-bound search below covers it
+  // at a fraction of the grid's cost.
+  const bool long_gap = !fresh && elapsed > config_.prediction.max_extrapolation;
+  if ((!best || poor(*best)) && !long_gap) {
+    // No measured velocity yet (start-up) or the hypotheses did not help: search the bounded region.
     SearchResult found = searchPose(aligner_, *target_, source_, region, config_.search,
                                     [this](const NdtResult& m) { return acceptable(m); });
-    searched = true;
     out.search_candidates = found.candidates;
     out.search_ambiguous = found.ambiguous;
     consider(std::move(found.best));
     // The search saw a better fit than the best kept but could not tell it from another: nothing is sure.
     if (found.ambiguous && best && found.best_nvtl > best->nvtl) best.reset();
+  }
+  std::optional<Eigen::Isometry3d> found_globally;
+  if (!best && long_gap &&
+      (!last_global_search_ || stamp - *last_global_search_ >= config_.lost.search_period ||
+       stamp < *last_global_search_)) {
+    // Lost: the branch-and-bound search of the bounded region (every yaw when the rotation is not known).
+    SearchRegion wide = region;
+    if (!rotation_known) wide.yaw_range = M_PI;
+    GlobalLocalizationResult g = searchGlobally(wide);
+    last_global_search_ = stamp;
+    out.global_search = true;
+    out.global_search_reason = g.reason;
+    if (g.found) {
+      best = g.refinement;
+      found_globally = g.map_T_base;
+    }
   }
   if (best) {
     out.ndt = std::move(*best);
@@ -315,16 +389,16 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   }
   out.align_ms = msSince(align_start);  // with the hypotheses and the search
   if (out.match_accepted) {
-    out.pose = toIsometry(out.ndt.transform);
+    out.pose = found_globally ? *found_globally : toIsometry(out.ndt.transform);
     if (!out.pose.matrix().allFinite()) out.match_accepted = false;
   }
   out.lost = !out.match_accepted;
+  out.since_last_match = fresh ? 0.0 : elapsed;
   if (out.match_accepted) {
     out.recovered = !fresh && elapsed > config_.lost.max_coast_time;
-    out.since_last_match = 0.0;
-    // A jump found by the search after the velocity stopped being trusted is a correction, not a motion
-    // to extrapolate: the velocity is measured again from the next match.
-    if (fresh || (searched && !velocity_trusted && elapsed > config_.prediction.max_extrapolation))
+    // A jump found by the global search after a gap is a correction, not a motion to extrapolate: the
+    // velocity is measured again from the next match.
+    if (fresh || found_globally)
       predictor_.reset(out.pose, stamp);
     else
       predictor_.update(out.pose, stamp, config_.preprocess.deskew_twist_smoothing);
@@ -337,7 +411,6 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   } else {
     // The bounded prediction: extrapolated while the velocity is trusted, else held at the last pose.
     out.pose = guess;
-    out.since_last_match = elapsed;
     out.covariance = coastingCovariance(last_covariance_, region, config_.covariance);
     out.twist_covariance = predictionCovariance(config_.covariance);
   }

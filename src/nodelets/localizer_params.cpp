@@ -72,6 +72,7 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
   load("search/refine", c.search.refine);
   load("search/ambiguity_ratio", c.search.ambiguity_ratio);
   load("lost/max_coast_time", c.lost.max_coast_time);
+  load("lost/search_period", c.lost.search_period);
   pnh.param("preprocess/time_field", p.time_field, p.time_field);
   load("ndt/resolution", c.ndt.resolution);
   load("ndt/min_points_per_voxel", c.ndt.min_points_per_voxel);

@@ -167,13 +167,16 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     if (out.state == LocalizerState::kWaitingForInitialPose) maybeStartGlobalLocalization(msg->header.stamp);
     if (out.state != LocalizerState::kTracking) return;
     if (out.recovered)
-      NODELET_WARN("recovered: matching again after %.1f s without an accepted match", since_last_match_);
+      NODELET_WARN("recovered: matching again after %.1f s without an accepted match%s", out.since_last_match,
+                   out.global_search ? " (global search)" : "");
+    else if (out.global_search)
+      NODELET_WARN_THROTTLE(2.0, "lost: global search around the last pose found nothing: %s",
+                            out.global_search_reason.c_str());
     if (out.lost)
       NODELET_WARN_THROTTLE(2.0, "lost: no acceptable match for %.1f s (NVTL %.2f%s); %s", out.since_last_match,
                             out.ndt.nvtl, out.search_ambiguous ? ", search ambiguous" : "",
                             out.publish ? "publishing the bounded prediction"
                                         : "not publishing odometry or TF (lost/max_coast_time exceeded)");
-    since_last_match_ = out.since_last_match;
     publish(out, msg->header);
   }
 
@@ -206,7 +209,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     const GlobalLocalizationParams& g = params_.global_localization;
     SearchRegion region;
     const double size = req.size > 0.0 ? req.size : g.size;
-    region.radius = 0.5 * size * std::sqrt(2.0);  // the disc around the square
+    region.radius = 0.5 * size;  // the square searched is 2 * radius on a side
     region.yaw_range = req.yaw_range > 0.0 ? std::min<double>(req.yaw_range, M_PI) : g.yaw_range;
     if (req.use_center) {
       region.centre = poseFromXyzRpy((XyzRpy() << req.center_x, req.center_y, 0.0, 0.0, 0.0, req.yaw).finished());
@@ -214,27 +217,24 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       region.centre = *last;
     } else if (const std::optional<Eigen::AlignedBox3d> box = localizer_->mapBounds()) {
       region.centre.translation() = box->center();
-      region.radius = 0.5 * box->sizes().head<2>().norm();
+      region.radius = 0.5 * box->sizes().head<2>().maxCoeff();
     } else {
       res.message = "no map loaded yet";
       return true;
     }
-    const SearchResult r = localizer_->globalLocalize(region);
-    res.candidates = static_cast<std::uint32_t>(r.candidates);
-    res.score = r.best_nvtl;
-    res.runner_up_score = r.runner_up_nvtl;
-    res.success = r.best.has_value();
-    if (r.best) {
-      Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-      pose.matrix() = r.best->transform.cast<double>();
-      res.pose = tf2::toMsg(pose);
-      NODELET_INFO("global localization: (%.2f, %.2f) NVTL %.2f, runner-up %.2f, %d candidates", pose.translation().x(),
-                   pose.translation().y(), r.best_nvtl, r.runner_up_nvtl, r.candidates);
+    const GlobalLocalizationResult r = localizer_->globalLocalize(region);
+    res.candidates = static_cast<std::uint32_t>(r.candidates_evaluated);
+    res.score = r.score;
+    res.runner_up_score = r.runner_up_score;
+    res.success = r.found;
+    if (r.found) {
+      res.pose = tf2::toMsg(r.map_T_base);
+      NODELET_INFO("global localization: (%.2f, %.2f), score %.2f, runner-up %.2f, %.2f s",
+                   r.map_T_base.translation().x(), r.map_T_base.translation().y(), r.score, r.runner_up_score,
+                   r.seconds);
     } else {
-      res.message = r.candidates == 0 ? "no scan received yet"
-                    : r.ambiguous     ? "ambiguous: another pose fits nearly as well; give a smaller area"
-                                      : "no acceptable match in the area";
-      NODELET_WARN("global localization failed: %s", res.message.c_str());
+      res.message = r.reason;
+      NODELET_WARN("global localization failed: %s", r.reason.c_str());
     }
     return true;
   }
@@ -328,7 +328,6 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   TileDeltaSequence tile_sequence_;                        // tile_delta callback only (never concurrent)
   std::optional<LocalizerState> last_state_;               // for logging each state change once
   bool odom_published_by_others_ = false;
-  double since_last_match_ = 0.0;        // of the previous scan, for the recovery message
   ros::Time waiting_since_;              // first scan without an initial pose (automatic start)
   std::optional<Eigen::Vector2d> hint_;  // last initialpose_hint (map frame)
   ros::Publisher odom_pub_, status_pub_, aligned_pub_;
