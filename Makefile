@@ -144,3 +144,15 @@ asan: setup
 reliability: fuzz-build build
 	@$(SETUP) $(ROOT)/.venv/bin/python3 $(ROOT)/tools/reliability.py --fuzz-seconds $(FUZZ_SECONDS) \
 	  --parallel $(FUZZ_PARALLEL)
+
+# ---------------------------------------------------------------- tracking on real and hard recordings
+.PHONY: experiment-real experiment-hard
+# One JSON line per variant and mode (tools/experiment_tracking.py); long-running (real-time playback), not in CI.
+# make experiment-real: MulRan Riverside02 keyframes (../shared/data/real) as recorded, 10 % dropped, with gaps.
+# make experiment-hard: simulated hand-held walks (10 Hz and 2 Hz scans) and a recording with gaps.
+# VARIANTS="mulran handheld_2hz ..." runs only those.
+experiment-real: build
+	@$(SETUP) python3 $(ROOT)/tools/experiment_tracking.py $(or $(VARIANTS),real)
+
+experiment-hard: build
+	@$(SETUP) python3 $(ROOT)/tools/experiment_tracking.py $(or $(VARIANTS),hard)

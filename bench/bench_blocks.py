@@ -48,7 +48,10 @@ STEP = 2.0  # [m] between keyframes on the walk
 def load_map() -> tuple[np.ndarray, list[Path]]:
     files = sorted((DATA / "tiles").glob("*.pcd"))
     if not files:
-        raise SystemExit(f"bench_blocks: no tiles in {DATA / 'tiles'} (the real campus map); --quick runs without it")
+        raise SystemExit(
+            f"bench_blocks: no campus tiles in {DATA / 'tiles'}; this benchmark needs ../shared/data/real"
+            " (--quick runs without it)"
+        )
     parts = [xyz_array(chunk) for f in files if read_pcd_header(f).points for chunk in iter_pcd_chunks(f)]
     return np.concatenate(parts), files
 

@@ -79,7 +79,10 @@ def main() -> int:
     if args.quick:
         args.repeats = 1
     elif not inputs:
-        raise SystemExit(f"bench_tiling: no campus tiles in {CAMPUS_TILES} (the real map); --quick runs without it")
+        raise SystemExit(
+            f"bench_tiling: no campus tiles in {CAMPUS_TILES}; this benchmark needs ../shared/data/real"
+            " (--quick runs without it)"
+        )
     args.tmp_dir.mkdir(parents=True, exist_ok=True)
     load_before = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix="bench_tiling_", dir=args.tmp_dir) as tmp:

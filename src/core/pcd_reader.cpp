@@ -77,6 +77,9 @@ Header parseHeader(const std::string& path, const std::string& bytes) {
   }
   if (h.data.empty()) fail(path, "no DATA line in the header; is this a PCD file?");
   if (!have_points) h.points = width * height;
+  if (width * height != h.points)
+    fail(path, "WIDTH " + std::to_string(width) + " x HEIGHT " + std::to_string(height) + " disagrees with POINTS " +
+                   std::to_string(h.points));
   if (h.fields.empty()) fail(path, "no FIELDS line in the header");
   if (sizes.size() != h.fields.size() || types.size() != h.fields.size())
     fail(path, "SIZE and TYPE must have one entry per field");
@@ -119,9 +122,6 @@ float readFloat(const char* p, int size) {
   return static_cast<float>(v);
 }
 
-// LZF's densest code: a 3-byte back reference expands to 264 bytes.
-constexpr std::size_t kLzfMaxExpansion = 88;
-
 // LZF decompression (the format of PCL's binary_compressed): literal runs and back references.
 std::vector<char> lzfDecompress(const std::string& path, const unsigned char* in, std::size_t in_len,
                                 std::size_t out_len) {
@@ -152,33 +152,19 @@ std::vector<char> lzfDecompress(const std::string& path, const unsigned char* in
   return out;
 }
 
-// Refuses a POINTS the data cannot hold before anything is allocated for it (a corrupt header may claim 1e12
-// points): divisions, so no product can overflow.
-void checkPointsFit(const std::string& path, const Header& h, const char* data, std::size_t avail) {
-  const std::string claim = "POINTS " + std::to_string(h.points);
-  if (h.data == "binary") {
-    if (h.points > avail / h.point_step) fail(path, claim + ": the binary data is shorter than POINTS * point size");
-  } else if (h.data == "binary_compressed") {
-    if (avail < 8) fail(path, "the compressed data block is missing its sizes");
-    std::uint32_t packed = 0, unpacked = 0;
-    std::memcpy(&packed, data, 4);
-    std::memcpy(&unpacked, data + 4, 4);
-    if (h.points > unpacked / h.point_step) fail(path, claim + ": the compressed data holds fewer bytes than that");
-    if (unpacked / kLzfMaxExpansion > packed)
-      fail(path, "corrupt compressed data: " + std::to_string(packed) + " bytes cannot decompress to " +
-                     std::to_string(unpacked));
-  } else if (h.data == "ascii") {
-    std::size_t columns = 0;
-    for (const Field& f : h.fields) columns += f.count;
-    // A point is a line of `columns` values of at least one character, each followed by a blank or newline.
-    if (h.points > (avail + 1) / (2 * columns)) fail(path, claim + ": the ascii data is too short for that many");
-  } else {
-    fail(path, "unsupported DATA '" + h.data + "' (ascii, binary and binary_compressed are supported)");
-  }
+// LZF's best case: a 3-byte back reference repeats 264 bytes; a block claiming more is corrupt.
+constexpr std::size_t kLzfMaxExpansion = 88;
+
+void failTruncated(const std::string& path, const Header& h, const std::string& what) {
+  fail(path, "truncated: POINTS " + std::to_string(h.points) + " needs more " + what +
+                 " than the file holds; re-export or re-download it");
 }
 
 }  // namespace
 
+// Like PCL, the reference reader: POINTS records are read and anything after them (zero padding some
+// recorders leave, extra lines) is ignored; fewer records than POINTS is an error. Every count from the
+// header is checked against the file's size before the cloud is allocated.
 PointCloud readPcdXyz(const std::string& path) {
   std::ifstream file(path, std::ios::binary);
   if (!file) fail(path, "cannot open it; check the path and permissions");
@@ -187,16 +173,25 @@ PointCloud readPcdXyz(const std::string& path) {
   const Field* xyz[3] = {&xyzField(path, h, "x"), &xyzField(path, h, "y"), &xyzField(path, h, "z")};
   const char* data = bytes.data() + h.data_offset;
   const std::size_t avail = bytes.size() - h.data_offset;
-  checkPointsFit(path, h, data, avail);
-  PointCloud cloud(h.points);
+  PointCloud cloud;
   if (h.data == "binary") {
+    if (h.points > avail / h.point_step) failTruncated(path, h, "binary data");
+    cloud.resize(h.points);
     for (std::size_t i = 0; i < h.points; ++i)
       for (int a = 0; a < 3; ++a) cloud[i][a] = readFloat(data + i * h.point_step + xyz[a]->offset, xyz[a]->size);
   } else if (h.data == "binary_compressed") {
+    if (avail < 8) fail(path, "the compressed data block is missing its sizes");
     std::uint32_t packed = 0, unpacked = 0;
     std::memcpy(&packed, data, 4);
     std::memcpy(&unpacked, data + 4, 4);
-    if (avail - 8 < packed) fail(path, "the compressed data is shorter than its stated size");
+    if (avail - 8 < packed) failTruncated(path, h, "compressed data");
+    if (unpacked > kLzfMaxExpansion * static_cast<std::size_t>(packed))
+      fail(path, "corrupt compressed data sizes (" + std::to_string(packed) + " LZF bytes cannot decompress to " +
+                     std::to_string(unpacked) + ")");
+    if (h.points > unpacked / h.point_step || unpacked != h.points * h.point_step)
+      fail(path, "POINTS " + std::to_string(h.points) + " disagrees with the data: it decompresses to " +
+                     std::to_string(unpacked) + " bytes, not POINTS x " + std::to_string(h.point_step));
+    cloud.resize(h.points);
     const std::vector<char> raw =
         lzfDecompress(path, reinterpret_cast<const unsigned char*>(data + 8), packed, unpacked);
     // Decompressed layout is per field: all points' values of field 0, then field 1, ...
@@ -205,7 +200,7 @@ PointCloud readPcdXyz(const std::string& path) {
       const std::size_t stride = static_cast<std::size_t>(xyz[a]->size) * xyz[a]->count;
       for (std::size_t i = 0; i < h.points; ++i) cloud[i][a] = readFloat(raw.data() + base + i * stride, xyz[a]->size);
     }
-  } else {  // ascii, the last encoding checkPointsFit lets through
+  } else if (h.data == "ascii") {
     // Columns: each field contributes `count` values; find the column of x, y, z.
     std::size_t col[3] = {0, 0, 0}, columns = 0;
     for (const Field& f : h.fields) {
@@ -213,6 +208,8 @@ PointCloud readPcdXyz(const std::string& path) {
         if (&f == xyz[a]) col[a] = columns;
       columns += f.count;
     }
+    if (h.points > avail / (2 * columns)) failTruncated(path, h, "ascii lines");  // a value and a separator each
+    cloud.resize(h.points);
     std::istringstream in(std::string(data, avail));
     std::string line;
     std::size_t i = 0;
@@ -233,6 +230,8 @@ PointCloud readPcdXyz(const std::string& path) {
     }
     if (i < h.points)
       fail(path, "ascii data holds " + std::to_string(i) + " points, POINTS says " + std::to_string(h.points));
+  } else {
+    fail(path, "unsupported DATA '" + h.data + "' (ascii, binary and binary_compressed are supported)");
   }
   return cloud;
 }

@@ -16,6 +16,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "tile": ("commands.tile", "cut a global map PCD into grid puzzle tiles (or --verify a tiled map)"),
     "window": ("commands.window", "print the grid puzzle window (tiles to load) for a position, as JSON"),
     "simulate": ("commands.simulate", "generate a simulated LiDAR scenario: bag, ground truth, prior map"),
+    "import": ("commands.import_scans", "turn a folder of scans with poses and times into an experiment directory"),
     "blocks": ("commands.blocks", "build keyframe-stitched block maps (block map paper, Algorithm 1)"),
     "submaps": ("commands.submaps", "cut a global map into fixed-size overlapping square submaps"),
     "storage": ("commands.storage", "storage overhead of global map, tiles, blocks and submaps"),

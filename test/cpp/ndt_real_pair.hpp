@@ -1,4 +1,4 @@
-// The real HDL-32E pair (../shared/data/real/hdl32_pair) prepared the customary way, for tests and the benchmark.
+// The real HDL-32E pair (test/data/hdl32_pair) prepared the customary way, for tests and the benchmark.
 #pragma once
 
 #include <fstream>
@@ -11,7 +11,7 @@
 namespace grid_puzzle_localization {
 namespace real_pair {
 
-inline std::string dataDir() { return std::string(GPL_SOURCE_DIR) + "/../shared/data/real/hdl32_pair"; }
+inline std::string dataDir() { return std::string(GPL_SOURCE_DIR) + "/test/data/hdl32_pair"; }
 
 /// Drops (0, 0, 0) points, then a 0.1 m centroid voxel filter (no range crop).
 inline PointCloud load(const std::string& name) {

@@ -1,14 +1,27 @@
-"""Shared pytest fixtures: where the real data sets live (../shared/data/real, never copied here)."""
+"""Shared pytest fixtures: where the real data sets live.
 
+``real_data`` is test/data, the small real files committed with the tests. ``shared_real_data`` is the team's
+larger store ($GPL_SHARED_DATA, else ../shared/data/real beside the clone); a test that needs it is skipped,
+saying so, when it is absent.
+"""
+
+import os
 from pathlib import Path
 
 import pytest
 
-REAL_DATA = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real"
+ROOT = Path(__file__).resolve().parents[2]
+TEST_DATA = ROOT / "test" / "data"
+SHARED_REAL_DATA = Path(os.environ.get("GPL_SHARED_DATA") or ROOT.parent / "shared" / "data" / "real")
 
 
 @pytest.fixture(scope="session")
 def real_data() -> Path:
-    if not REAL_DATA.is_dir():
-        pytest.fail(f"real data not found at {REAL_DATA}: the repo must sit beside ../shared")
-    return REAL_DATA
+    return TEST_DATA
+
+
+@pytest.fixture(scope="session")
+def shared_real_data() -> Path:
+    if not SHARED_REAL_DATA.is_dir():
+        pytest.skip(f"needs the larger real data sets at {SHARED_REAL_DATA} (absent; set GPL_SHARED_DATA)")
+    return SHARED_REAL_DATA

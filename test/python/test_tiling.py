@@ -161,11 +161,11 @@ def test_failure_leaves_no_output_behind(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def campus_map(real_data, tmp_path_factory) -> Path:
+def campus_map(shared_real_data, tmp_path_factory) -> Path:
     from grid_puzzle_localization.pcd import merge_pcds
 
     path = tmp_path_factory.mktemp("campus") / "campus.pcd"
-    merge_pcds(sorted((real_data / "nova_utd_tiles" / "tiles").glob("*.pcd")), path)
+    merge_pcds(sorted((shared_real_data / "nova_utd_tiles" / "tiles").glob("*.pcd")), path)
     return path
 
 

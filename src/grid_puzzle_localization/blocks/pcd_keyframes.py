@@ -8,24 +8,20 @@ The PCD files (points in the sensor frame) are taken in file-name order, natural
 from __future__ import annotations
 
 import os
-import re
 from pathlib import Path
 
 from grid_puzzle_localization.blocks.keyframes import Scan
 from grid_puzzle_localization.blocks.poses import read_tum
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.pcd import read_pcd, xyz_array
-
-
-def _natural_key(path: Path) -> list[object]:
-    return [(0, int(part), "") if part.isdigit() else (1, 0, part) for part in re.split(r"(\d+)", path.name)]
+from grid_puzzle_localization.recordings.scans import natural_key
 
 
 def pcd_keyframe_scans(directory: str | os.PathLike, pose_file: str | os.PathLike) -> list[Scan]:
     directory = Path(directory)
     if not directory.is_dir():
         raise UserError(f"keyframe directory {directory} does not exist; give a directory of .pcd files")
-    files = sorted(directory.glob("*.pcd"), key=_natural_key)
+    files = sorted(directory.glob("*.pcd"), key=natural_key)
     if not files:
         raise UserError(f"keyframe directory {directory} holds no .pcd files")
     trajectory = read_tum(pose_file)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from grid_puzzle_localization.sim.recording_faults import YawSwing
 from grid_puzzle_localization.sim.scenario import ScenarioConfig, generate
 from grid_puzzle_localization.sim.sensors import SENSORS
 from grid_puzzle_localization.sim.worlds import WORLDS
@@ -43,6 +44,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--threads", type=int, default=ScenarioConfig.threads,
         help="sweep worker threads (default %(default)s; same output for any count)",
     )  # fmt: skip
+    parser.add_argument(
+        "--yaw-swing", type=float, nargs="?", const=YawSwing.swing_deg, metavar="DEG",
+        help=f"hand-held: the yaw swings DEG from one side to the other every {YawSwing.half_period_s} s"
+        f" (default {YawSwing.swing_deg:g} deg when given without a value)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--scan-rate", type=float, help="scans written per second, dividing the sensor's rate (default: every sweep)"
+    )
+    parser.add_argument(
+        "--gap", type=float, nargs=2, action="append", default=[], metavar=("START", "LENGTH"),
+        help="record nothing from START to START+LENGTH seconds into the run (repeatable)",
+    )  # fmt: skip
+    parser.add_argument("--no-imu", action="store_true", help="record no IMU (a LiDAR-only recording)")
     parser.add_argument("--force", action="store_true", help="replace a non-empty output directory")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
@@ -59,6 +73,10 @@ def run(args: argparse.Namespace) -> int:
         start_time=args.start_time,
         threads=args.threads,
         movers=args.movers,
+        yaw_swing=YawSwing(swing_deg=args.yaw_swing) if args.yaw_swing is not None else None,
+        scan_rate=args.scan_rate,
+        gaps=tuple(tuple(g) for g in args.gap),
+        imu=not args.no_imu,
     )
     summary = generate(cfg, args.output or args.scenario, force=args.force, progress=not args.quiet)
     print(

@@ -4,6 +4,10 @@
 stream; ``ascii`` is decoded line batch by line batch; ``binary_compressed`` (LZF over the whole data
 section, stored field by field) cannot be streamed and is decompressed once. Points with a NaN or
 infinite x, y or z are dropped and counted, never silently.
+
+Like PCL, the reference reader, a file holds POINTS records and whatever follows them is ignored:
+some recorders pad the data section (``POINTS 121023`` followed by room for 121,350 records) or
+append lines. A data section shorter than POINTS records is refused as truncated.
 """
 
 from __future__ import annotations
@@ -24,7 +28,9 @@ from grid_puzzle_localization.pcd.header import PcdHeader, read_pcd_header
 
 XYZ = ("x", "y", "z")
 XYZ_DTYPE = np.dtype([(name, "<f4") for name in XYZ])  # x, y, z as float32: 12 bytes a point
-_LZF_MAX_EXPANSION = 88  # decompressed bytes per compressed byte, at most
+# LZF's best case: a 3-byte back reference repeats 264 bytes. A data section claiming to decompress to
+# more is corrupt, and is refused before anything that size is allocated.
+LZF_MAX_EXPANSION = 88
 
 
 @dataclass
@@ -117,12 +123,11 @@ class PcdChunks:
         with open(self.path, "rb") as f:
             first_line = f.read(h.header_bytes).count(b"\n") + 1
             seen = 0
-            while True:
-                lines = [line for line in itertools.islice(f, self.chunk_points) if line.strip()]
+            while seen < h.points:
+                wanted = min(self.chunk_points, h.points - seen)
+                lines = [line for line in itertools.islice(f, wanted) if line.strip()]
                 if not lines:
                     break
-                if seen + len(lines) > h.points:
-                    raise PcdError(f"{self.path}: POINTS {h.points} disagrees with the data: more data lines follow")
                 yield decode_ascii_lines(lines, h.dtype, self.path, first_line + seen)
                 seen += len(lines)
         if seen < h.points:
@@ -139,6 +144,14 @@ def read_compressed(path: str | os.PathLike, h: PcdHeader) -> np.ndarray:
         if len(sizes) < 8:
             raise PcdError(f"{path}: truncated: the binary_compressed data section is missing")
         compressed_size, raw_size = struct.unpack("<II", sizes)
+        available = os.path.getsize(path) - h.header_bytes - 8
+        if compressed_size > available:
+            raise PcdError(f"{path}: truncated: {compressed_size} compressed bytes declared, {available} present")
+        if raw_size > LZF_MAX_EXPANSION * compressed_size:
+            raise PcdError(
+                f"{path}: corrupt binary_compressed sizes: {compressed_size} LZF bytes cannot decompress to"
+                f" {raw_size}; re-export the file"
+            )
         if raw_size != h.data_bytes:
             raise PcdError(
                 f"{path}: POINTS {h.points} disagrees with the data: it decompresses to {raw_size} bytes,"
@@ -147,11 +160,9 @@ def read_compressed(path: str | os.PathLike, h: PcdHeader) -> np.ndarray:
         payload = f.read(compressed_size)
     if len(payload) < compressed_size:
         raise PcdError(f"{path}: truncated: {compressed_size} compressed bytes declared, {len(payload)} present")
-    # LZF expands 3 bytes to 264 at most: a larger size is corrupt, refused before it is allocated.
     raw = None
-    if raw_size <= _LZF_MAX_EXPANSION * compressed_size:
-        with contextlib.suppress(ValueError):  # python-lzf's "error in compressed data"
-            raw = lzf.decompress(payload, raw_size)
+    with contextlib.suppress(ValueError):  # python-lzf's "error in compressed data"
+        raw = lzf.decompress(payload, raw_size)
     if raw is None or len(raw) != raw_size:
         raise PcdError(f"{path}: corrupt binary_compressed data (LZF does not decompress to {raw_size} bytes)")
     out = np.empty(h.points, dtype=h.dtype)
@@ -166,16 +177,12 @@ def read_compressed(path: str | os.PathLike, h: PcdHeader) -> np.ndarray:
 
 
 def check_binary_size(h: PcdHeader, available: int, path: str | os.PathLike) -> None:
-    """Raises PcdError unless a ``binary`` data section of ``available`` bytes holds exactly POINTS records."""
+    """Raises PcdError unless a ``binary`` data section of ``available`` bytes holds POINTS records (bytes
+    after them are ignored, as PCL does)."""
     if available < h.data_bytes:
         raise PcdError(
             f"{path}: truncated: POINTS {h.points} x {h.record_bytes} bytes needs {h.data_bytes} bytes of data"
             f" but the file holds {available}; re-export or re-download the file"
-        )
-    if available > h.data_bytes:
-        raise PcdError(
-            f"{path}: POINTS {h.points} disagrees with the data: {available} data bytes hold"
-            f" {available / h.record_bytes:g} records of {h.record_bytes} bytes"
         )
 
 

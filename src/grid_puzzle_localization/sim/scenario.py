@@ -32,6 +32,7 @@ from grid_puzzle_localization.sim.mapping import MAP_DTYPE, DriftBounds, VoxelMa
 from grid_puzzle_localization.sim.movers import Movers, make_movers
 from grid_puzzle_localization.sim.ordered import ordered_map
 from grid_puzzle_localization.sim.raycast import RayCaster
+from grid_puzzle_localization.sim.recording_faults import YawSwing, check_gaps, in_gaps, with_yaw_swing
 from grid_puzzle_localization.sim.sensors import DEFAULT_SENSOR, get_sensor
 from grid_puzzle_localization.sim.trajectory import RATE, Trajectory, localization_trajectory, mapping_trajectory
 from grid_puzzle_localization.sim.worlds import check_world, make_world
@@ -59,6 +60,10 @@ class ScenarioConfig:
     movers: int | None = None  # moving pedestrians/cars in the scans (not in the map); None: world default
     drift: DriftBounds = field(default_factory=DriftBounds)
     imu_noise: ImuNoise = field(default_factory=ImuNoise)
+    imu: bool = True  # False: no imu topic (a LiDAR-only recording)
+    yaw_swing: YawSwing | None = None  # hand-held: the localization run's yaw swings (the map run does not)
+    scan_rate: float | None = None  # [Hz] scans written to the bag (every n-th sweep); None: every sweep
+    gaps: tuple[tuple[float, float], ...] = ()  # (start, length) [s]: nothing recorded in these intervals
 
     def resolved(self) -> ScenarioConfig:
         """A copy with defaults filled in, after checking every parameter (UserError if bad)."""
@@ -75,6 +80,10 @@ class ScenarioConfig:
             raise UserError(f"--threads must be at least 1 (got {self.threads})")
         if self.movers is not None and self.movers < 0:
             raise UserError(f"--movers must be a non-negative count (got {self.movers})")
+        if self.yaw_swing is not None:
+            self.yaw_swing.check()
+        if self.scan_rate is not None:
+            scan_every(get_sensor(sensor).rate, self.scan_rate)
         return replace(self, sensor=sensor, map_leaf=leaf)
 
 
@@ -96,6 +105,17 @@ class Summary:
     seconds_mapping: float
     cpu_seconds_localization: float
     cpu_seconds_mapping: float
+
+
+def scan_every(sensor_rate: float, scan_rate: float | None) -> int:
+    """Every how many sweeps a scan is written, for ``scan_rate`` [Hz] (UserError unless it divides the
+    sensor's rate)."""
+    if scan_rate is None:
+        return 1
+    stride = round(sensor_rate / scan_rate) if scan_rate > 0 else 0
+    if stride < 1 or abs(stride * scan_rate - sensor_rate) > 1e-9 * sensor_rate:
+        raise UserError(f"--scan-rate {scan_rate} Hz must divide the sensor's {sensor_rate:g} Hz (e.g. 2, 5 or 10)")
+    return stride
 
 
 def _rng(seed: int, *stream: int) -> np.random.Generator:
@@ -134,38 +154,47 @@ def _write_bag(
     gt_step = round(RATE / GROUND_TRUTH_RATE)
     samples_per_sweep = round(RATE / sensor.rate)
     n_sweeps = int(np.floor(traj.duration * sensor.rate + 1e-9))
+    stride = scan_every(sensor.rate, cfg.scan_rate)
+    every = np.arange(0, n_sweeps, stride)
+    scans = every[~in_gaps(every / sensor.rate, cfg.gaps)]  # sweeps written, by the time they start
 
-    def sweep_cloud(k: int) -> tuple[int, np.ndarray]:
+    def sweep_cloud(j: int) -> tuple[int, np.ndarray]:
+        k = int(scans[j])
         sweep = sensor.sweep(k)
         t_mid = (k + 0.5) / sensor.rate
         frozen = movers.mesh_at(t_mid, traj.interpolate(np.array([t_mid]))[0][0, :2])
         return len(sweep.dt), sim.simulate(traj, k / sensor.rate, sweep, _rng(cfg.seed, 4, k), frozen)
 
     rays = points = 0
-    clouds = ordered_map(sweep_cloud, n_sweeps, cfg.threads)
+    clouds = ordered_map(sweep_cloud, len(scans), cfg.threads)
     # closing(clouds): an error stops the queued sweeps at once
-    with ScenarioBag(str(path), BagNames()) as bag, _progress(n_sweeps, "localization run", show) as bar, closing(
+    with ScenarioBag(str(path), BagNames()) as bag, _progress(len(scans), "localization run", show) as bar, closing(
         clouds
     ):
         bag.write_tf_static(t0, mount.translation, Rotation.from_matrix(mount.rotation).as_quat())
 
         def motion(i0: int, i1: int) -> None:
-            """IMU and ground truth samples i0 .. i1 - 1 (ground truth every gt_step-th sample)."""
+            """IMU and ground truth samples i0 .. i1 - 1 (ground truth every gt_step-th sample) outside the gaps."""
             i = np.arange(i0, min(i1, len(traj.position)))
-            bag.write_imu(_sample_stamps_ns(t0, i), imu.gyro[i], imu.accel[i], gyro_var, accel_var)
+            i = i[~in_gaps(i / RATE, cfg.gaps)]
+            if cfg.imu:
+                bag.write_imu(_sample_stamps_ns(t0, i), imu.gyro[i], imu.accel[i], gyro_var, accel_var)
             g = i[i % gt_step == 0]
             stamps = _sample_stamps_ns(t0, g)
             bag.write_ground_truth(stamps, traj.position[g], traj.quat[g], vel_body[g], gyro_true[g])
 
-        for k, (n_rays, cloud) in enumerate(clouds):
-            motion(k * samples_per_sweep, (k + 1) * samples_per_sweep)
+        done = 0  # trajectory samples written
+        for j, (n_rays, cloud) in enumerate(clouds):
+            k = int(scans[j])
+            motion(done, (k + 1) * samples_per_sweep)
+            done = (k + 1) * samples_per_sweep
             start, end = _sample_stamps_ns(t0, np.array([k, k + 1]) * samples_per_sweep)
             bag.write_points(int(start), int(end), cloud)
             rays += n_rays
             points += len(cloud)
             bar.update()
-        motion(n_sweeps * samples_per_sweep, len(traj.position))
-    return n_sweeps, rays, points
+        motion(done, len(traj.position))
+    return len(scans), rays, points
 
 
 def _write_map(path: Path, cfg: ScenarioConfig, sim: SweepSimulator, traj: Trajectory, mount: Mount, show: bool):
@@ -198,6 +227,7 @@ def _describe(cfg: ScenarioConfig, world, loc: Trajectory, mapping: Trajectory, 
     sensor = get_sensor(cfg.sensor)
     params = asdict(cfg)
     params.pop("threads")
+    params["gaps"] = [list(g) for g in cfg.gaps]
     return {
         "scenario": cfg.world,
         "parameters": params,
@@ -215,7 +245,12 @@ def _describe(cfg: ScenarioConfig, world, loc: Trajectory, mapping: Trajectory, 
         "movers": {kind: movers.kinds.count(kind) for kind in sorted(set(movers.kinds))},
         "mapping_run": {"duration_s": float(mapping.duration), "length_m": round(mapping.length(), 3)},
         "frames": {"map": "map", "base": "base_link", "lidar": "lidar"},
-        "topics": {"points": "points", "imu": "imu", "ground_truth": "ground_truth", "tf_static": "/tf_static"},
+        "topics": {
+            "points": "points",
+            **({"imu": "imu"} if cfg.imu else {}),
+            "ground_truth": "ground_truth",
+            "tf_static": "/tf_static",
+        },
         "files": list(FILES),
     }
 
@@ -229,7 +264,10 @@ def generate(cfg: ScenarioConfig, out_dir: str | os.PathLike, force: bool = Fals
     loc = localization_trajectory(world, cfg.scale, _rng(cfg.seed, 1))
     if cfg.duration is not None:
         loc = loc.truncated(cfg.duration)
-    mapping = mapping_trajectory(world, loc, _rng(cfg.seed, 2))
+    check_gaps(cfg.gaps, loc.duration)
+    mapping = mapping_trajectory(world, loc, _rng(cfg.seed, 2))  # along the smooth route: the map run is not hand-held
+    if cfg.yaw_swing is not None:
+        loc = with_yaw_swing(loc, cfg.yaw_swing)
     movers = make_movers(world, cfg.scale, loc.duration, cfg.movers, _rng(cfg.seed, 7))
     mount = Mount(np.array(MOUNTS[cfg.world]), np.eye(3))
     with atomic_directory(out, durable=True) as tmp, RayCaster(world.mesh, threads=1) as caster:
