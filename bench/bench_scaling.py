@@ -8,7 +8,8 @@ the global PCD, as map_source pcd) and ``tiles`` (the paper's window of tile fil
 map_source tiles). One JSON line per size and mode, then one line with the ratios the targets are about.
 A last line measures loading throughput: a 40 m x 40 m patch of the same world sampled densely
 (``--dense-spacing``, thousands of points a 2 m tile, as in the paper's maps) read and folded into an
-empty target by one thread, in points per second of wall time and per CPU second of that thread. The drive heads 30 degrees north of east from 40 m inside the west edge, at 10 m/s, 10 Hz.
+empty target by one thread, in points per second of wall time and per CPU second of that thread.
+The drive heads 30 degrees north of east from 40 m inside the west edge, at 10 m/s, 10 Hz.
 ``--quick`` is a smoke run: a 80 m x 40 m crop of a fifth-scale world, 4 m tiles, a 2 s drive."""
 
 from __future__ import annotations
