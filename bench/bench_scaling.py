@@ -56,7 +56,7 @@ def crop(points: np.ndarray, x0: float, y0: float, x1: float, y1: float) -> np.n
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="smoke run: fifth-scale world, 1 m spacing, 2 s drive")
-    parser.add_argument("--spacing", type=float, default=0.35, help="[m] surface sampling of the base map")
+    parser.add_argument("--spacing", type=float, default=0.4, help="[m] surface sampling of the base map")
     parser.add_argument("--dense-spacing", type=float, default=0.05, help="[m] sampling of the throughput patch")
     parser.add_argument("--seconds", type=float, default=20.0, help="[s] drive length at 10 m/s")
     parser.add_argument("--grid-size", type=float, default=2.0, help="[m] tile side s")
