@@ -281,7 +281,7 @@ int load(const std::string& dir, double s, int repeats) {
   change.reset = true;
   for (const auto& entry : fs::directory_iterator(change.dir))
     if (entry.path().extension() == ".pcd") change.added.push_back(entry.path().stem().string());
-  std::vector<double> read_ms, fold_ms;
+  std::vector<double> read_ms, fold_ms, read_cpu_ms, fold_cpu_ms;
   std::size_t points = 0;
   for (int r = 0; r < repeats; ++r) {
     gpl::VoxelMapParams params;
@@ -293,17 +293,24 @@ int load(const std::string& dir, double s, int repeats) {
     for (const std::string& e : worker.takeErrors()) std::fprintf(stderr, "bench_scaling: %s\n", e.c_str());
     read_ms.push_back(st.tile_read_ms);
     fold_ms.push_back(st.tile_fold_ms);
+    read_cpu_ms.push_back(st.tile_read_cpu_ms);
+    fold_cpu_ms.push_back(st.tile_fold_cpu_ms);
     points = st.tile_points_read;
   }
-  std::sort(read_ms.begin(), read_ms.end());
-  std::sort(fold_ms.begin(), fold_ms.end());
-  const double read = read_ms[read_ms.size() / 2], fold = fold_ms[fold_ms.size() / 2];
+  const auto median = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  const double read = median(read_ms), fold = median(fold_ms);
+  const double read_cpu = median(read_cpu_ms), fold_cpu = median(fold_cpu_ms);
   std::printf(
       "{\"mode\": \"load\", \"tiles\": %zu, \"points\": %zu, \"points_per_tile\": %.0f, \"repeats\": %d, "
       "\"read_ms_median\": %.1f, \"fold_ms_median\": %.1f, \"read_mpoints_per_s\": %.2f, "
-      "\"fold_mpoints_per_s\": %.2f, \"load_mpoints_per_s\": %.2f, \"threads\": 1}\n",
+      "\"fold_mpoints_per_s\": %.2f, \"load_mpoints_per_s\": %.2f, \"read_cpu_ms_median\": %.1f, "
+      "\"fold_cpu_ms_median\": %.1f, \"load_mpoints_per_cpu_s\": %.2f, \"threads\": 1}\n",
       change.added.size(), points, static_cast<double>(points) / change.added.size(), repeats, read, fold,
-      points / read / 1e3, points / fold / 1e3, points / (read + fold) / 1e3);
+      points / read / 1e3, points / fold / 1e3, points / (read + fold) / 1e3, read_cpu, fold_cpu,
+      points / (read_cpu + fold_cpu) / 1e3);
   return 0;
 }
 

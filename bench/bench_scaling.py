@@ -6,9 +6,10 @@ For each size the C++ bench_scaling writes the global PCD and the tile files, th
 through the core localizer (no roscore) twice, each in a fresh process: ``global`` (the map worker reads
 the global PCD, as map_source pcd) and ``tiles`` (the paper's window of tile files read by reference, as
 map_source tiles). One JSON line per size and mode, then one line with the ratios the targets are about.
-A last line measures loading throughput: a 40 m x 40 m patch of the same world sampled at the paper's
-density (``--dense-spacing``, about 1,600 points a 2 m tile) read and folded into an empty target by
-one thread. The drive heads 30 degrees north of east from 40 m inside the west edge, at 10 m/s, 10 Hz.
+A last line measures loading throughput: a 40 m x 40 m patch of the same world sampled densely
+(``--dense-spacing``, thousands of points a 2 m tile, as in the paper's maps) read and folded into an
+empty target by one thread, in points per second of wall time and per CPU second of that thread.
+The drive heads 30 degrees north of east from 40 m inside the west edge, at 10 m/s, 10 Hz.
 ``--quick`` is a smoke run: a 80 m x 40 m crop of a fifth-scale world, 4 m tiles, a 2 s drive."""
 
 from __future__ import annotations
@@ -55,7 +56,7 @@ def crop(points: np.ndarray, x0: float, y0: float, x1: float, y1: float) -> np.n
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="smoke run: fifth-scale world, 1 m spacing, 2 s drive")
-    parser.add_argument("--spacing", type=float, default=0.35, help="[m] surface sampling of the base map")
+    parser.add_argument("--spacing", type=float, default=0.4, help="[m] surface sampling of the base map")
     parser.add_argument("--dense-spacing", type=float, default=0.05, help="[m] sampling of the throughput patch")
     parser.add_argument("--seconds", type=float, default=20.0, help="[s] drive length at 10 m/s")
     parser.add_argument("--grid-size", type=float, default=2.0, help="[m] tile side s")

@@ -24,7 +24,7 @@ def main() -> int:
     runs = [r for r in runs if r.get("bench") == "scaling"]
     fig = Figure(figsize=(9, 3.4), layout="constrained")
     axes = fig.subplots(1, 2)
-    panels = (("peak_rss_mb", "peak RSS"), ("map_memory_mb", "map memory (RSS with map - without)"))
+    panels = (("peak_rss_mb", "peak RSS"), ("map_memory_mb", "map memory"))
     for ax, (key, title) in zip(axes, panels, strict=True):
         for mode, (color, label) in STYLE.items():
             mine = sorted((r["area_km2"], r[key]) for r in runs if r["mode"] == mode)

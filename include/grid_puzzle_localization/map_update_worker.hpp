@@ -73,6 +73,8 @@ struct MapUpdateStats {
   std::size_t tile_points_read = 0;  ///< points in them
   double tile_read_ms = 0.0;         ///< wall time reading them [ms]
   double tile_fold_ms = 0.0;         ///< wall time folding window tiles into the target [ms]
+  double tile_read_cpu_ms = 0.0;     ///< CPU time of the worker thread reading them [ms] (its share of a core)
+  double tile_fold_cpu_ms = 0.0;     ///< CPU time of the worker thread folding them [ms]
   std::size_t cache_hits = 0;        ///< entering tiles served by the prefetch cache
   std::size_t cache_bytes = 0;       ///< bytes held by the prefetch cache now
   std::size_t points_outside = 0;    ///< tile-aligned: points not added because their voxel is in another tile
