@@ -11,6 +11,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from grid_puzzle_localization.util.atomic import atomic_write
+from grid_puzzle_localization.util.iteration import zip_equal
 
 STYLE = {"global": ("tab:blue", "global map (pcd)"), "tiles": ("tab:orange", "grid puzzle (tiles by reference)")}
 
@@ -25,7 +26,7 @@ def main() -> int:
     fig = Figure(figsize=(9, 3.4), layout="constrained")
     axes = fig.subplots(1, 2)
     panels = (("peak_rss_mb", "peak RSS"), ("map_memory_mb", "map memory"))
-    for ax, (key, title) in zip(axes, panels, strict=True):
+    for ax, (key, title) in zip_equal(axes, panels):
         for mode, (color, label) in STYLE.items():
             mine = sorted((r["area_km2"], r[key]) for r in runs if r["mode"] == mode)
             ax.plot([a for a, _ in mine], [v for _, v in mine], "o-", color=color, label=label)

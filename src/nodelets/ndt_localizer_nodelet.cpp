@@ -114,7 +114,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     if (by_reference) {  // the map worker reads the files
       localizer_->map().submit(MapChange::tileFiles(
           msg->grid_size,
-          {msg->tile_dir, msg->index_revision, msg->reset, msg->added_ids, msg->removed_ids, msg->prefetch_ids}));
+          {msg->tile_dir, msg->index_revision, msg->reset != 0, msg->added_ids, msg->removed_ids, msg->prefetch_ids}));
       return;
     }
     try {

@@ -161,7 +161,7 @@ def _checked_header(entries: dict[str, list[str]], offset: int, path) -> PcdHead
     for name, size, t, count in zip_equal(fields, sizes, types, counts):
         if t not in _VALID_SIZES or size not in _VALID_SIZES[t] or count < 1:
             raise PcdError(f"{path}: field '{name}' has unsupported TYPE {t} SIZE {size} COUNT {count}")
-    record_bytes = sum(s * c for s, c in zip(sizes, counts, strict=True))
+    record_bytes = sum(s * c for s, c in zip_equal(sizes, counts))
     if record_bytes > _MAX_RECORD_BYTES:
         raise PcdError(f"{path}: SIZE x COUNT make a point record of {record_bytes} bytes; the COUNT line is corrupt")
     width, height, points = (_ints(entries, key, path, single=True)[0] for key in ("WIDTH", "HEIGHT", "POINTS"))
