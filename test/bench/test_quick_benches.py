@@ -25,6 +25,8 @@ QUICK = {
     "bench-sim": [sys.executable, str(ROOT / "bench/bench_sim.py"), "--quick"],
     "bench-blocks": [sys.executable, str(ROOT / "bench/bench_blocks.py"), "--quick"],
     "bench-monitor": [sys.executable, str(ROOT / "bench/bench_monitor.py"), "--quick"],
+    "bench-scaling": [sys.executable, str(ROOT / "bench/bench_scaling.py"), "--quick"],
+    "bench-global-localization": [sys.executable, str(ROOT / "bench/bench_global_localization.py"), "--quick"],
 }
 TIMEOUT_S = 300  # generous on a shared 2-core machine; a quick mode takes seconds
 
