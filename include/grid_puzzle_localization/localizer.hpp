@@ -58,7 +58,9 @@ struct HypothesesConfig {
 };
 
 /// After the last accepted match the localizer publishes its bounded prediction for at most
-/// max_coast_time [s] > 0; after that LocalizerOutput::publish is false until a match is accepted again.
+/// max_coast_time [s] > 0, and only while a gyro measures the rotation since that match (without one the
+/// predicted heading is not measured); after that LocalizerOutput::publish is false until a match is accepted
+/// again.
 /// Once the prediction is no longer extrapolated, scans that nothing else matched run the branch-and-bound
 /// global search around the last accepted pose (the bounded region, every yaw when the rotation is not
 /// known), at most once per search_period [s] > 0 of scan time (a search takes about a second).
@@ -140,7 +142,7 @@ struct LocalizerOutput {
   /// No match was accepted on this scan, after the hypotheses and the search: the pose is not measured.
   bool lost = false;
   /// The pose may be published: a match was accepted, or the last accepted one is at most
-  /// lost.max_coast_time old.
+  /// lost.max_coast_time old and a gyro covers the time since.
   bool publish = false;
   double since_last_match = 0.0;     ///< [s] from the last accepted match (or initial pose) before this scan
   int hypotheses = 0;                ///< extra alignments from the hypotheses on this scan

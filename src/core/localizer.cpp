@@ -371,14 +371,26 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   auto poor = [&](const NdtResult& r) {
     return !acceptable(r) || r.nvtl < config_.hypotheses.poor_nvtl_ratio * reference_nvtl_;
   };
+  // A match farther from the last accepted pose than the bounded region reaches (the fastest motion seen, or
+  // max_speed before any) is a false minimum, however well it scores: a pose cannot have got there.
+  auto reachable = [&](const NdtResult& r) {
+    return (toIsometry(r.transform).translation() - held.translation()).head<2>().norm() <=
+           region.radius + config_.search.step;
+  };
   std::optional<NdtResult> best;
   auto consider = [&](std::optional<NdtResult> r) {
-    if (r && acceptable(*r) && (!best || r->nvtl > best->nvtl)) best = std::move(r);
+    if (r && acceptable(*r) && reachable(*r) && (!best || r->nvtl > best->nvtl)) best = std::move(r);
   };
   if (velocity_trusted) {
     out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
-    consider(out.ndt);
-    if (poor(out.ndt)) consider(tryHypotheses(guess, held, rotation_known, out));
+    // Without a gyro a poor match is not taken even from the prediction: a yaw flip between scans (a hand-held
+    // swing reversing) lands in a false minimum at the predicted heading that still passes the absolute gate.
+    if (rotation_known || !poor(out.ndt)) consider(out.ndt);
+    if (poor(out.ndt)) {
+      // An alternative is taken only when it fits as well as the track did: a poor one is another false minimum.
+      std::optional<NdtResult> alternative = tryHypotheses(guess, held, rotation_known, out);
+      if (alternative && !poor(*alternative)) consider(std::move(alternative));
+    }
   }
   // Past max_extrapolation (a gap, a loss) the region is large: the branch-and-bound search below covers it
   // at a fraction of the grid's cost.
@@ -389,7 +401,9 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
                                     [this](const NdtResult& m) { return acceptable(m); });
     out.search_candidates = found.candidates;
     out.search_ambiguous = found.ambiguous;
-    consider(std::move(found.best));
+    // Without a trusted prediction the search's answer is all there is: one scoring well below the last accepted
+    // match is a false minimum elsewhere (the scene does not change that much between scans), not the pose.
+    if (found.best && !poor(*found.best)) consider(std::move(found.best));
     // The search saw a better fit than the best kept but could not tell it from another: nothing is sure.
     if (found.ambiguous && best && found.best_nvtl > best->nvtl) best.reset();
   }
@@ -450,7 +464,10 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
         window_->addScan(stamp, out.match_accepted ? &out.pose : nullptr, information);
     if (fused && fused->stamp == stamp && out.match_accepted) out.pose = fused->pose;
   }
-  out.publish = out.match_accepted || out.since_last_match <= config_.lost.max_coast_time;
+  // A scan that no pose fits contradicts the prediction; only a gyro still measures the heading then. Without
+  // one the predicted yaw is a guess (a hand-held swing reverses between scans, and poses sampled a swing period
+  // apart show no turn at all to bound it), so the prediction is not published.
+  out.publish = out.match_accepted || (rotation_known && out.since_last_match <= config_.lost.max_coast_time);
   out.twist = predictor_.twist();
   // Samples since the last accepted pose are kept while they can still serve a prediction from it.
   gyro_.dropBefore(std::max(predictor_.stamp(), stamp - config_.prediction.max_extrapolation));

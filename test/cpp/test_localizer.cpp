@@ -403,7 +403,8 @@ TEST(Localizer, LostStopsPublishingThenTheGlobalSearchRecovers) {
       EXPECT_LT(t::rotationError(out.pose, truth), 0.005);
     } else {
       EXPECT_TRUE(out.lost) << "scan " << i;
-      EXPECT_EQ(out.publish, time <= c.lost.max_coast_time + 1e-9) << "scan " << i;
+      // No gyro: the heading of a prediction the scans contradict is not measured, so it is never published.
+      EXPECT_FALSE(out.publish) << "scan " << i;
       stopped = stopped || !out.publish;
     }
   }
@@ -413,6 +414,65 @@ TEST(Localizer, LostStopsPublishingThenTheGlobalSearchRecovers) {
       loc.processScan(*recovered_at + 0.1, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 800), mount());
   EXPECT_TRUE(out.match_accepted);
   EXPECT_LT(t::translationError(out.pose, truth), 0.05);
+}
+
+// Hand-held at 2 Hz without a gyro: the yaw swings +-30 deg about the walking direction in step with the scans, so
+// consecutive scans are 60 deg apart and poses one second apart show no turn at all. Every pose published is within
+// 5 cm and 1 deg of the truth: a scan that nothing matched is not published with a guessed heading, and no
+// unpublished span reaches 2 s.
+TEST(Localizer, HandHeldSixtyDegreeFlipsAreNeverPublishedWithAWrongHeading) {
+  auto truth = [](double time) {
+    const bool swung = std::lround(time / 0.5) % 2 == 1;
+    return t::poseXYYaw(-10.0 + 0.8 * time, 0.3 * time, 0.1 + (swung ? M_PI / 3 : 0.0));
+  };
+  const gpl::LocalizerConfig c = testConfig();
+  const gpl::PointCloud world = t::makeWorld();
+  gpl::Localizer loc(c);
+  loc.map().submit(gpl::MapChange::fullCloud(world));
+  loc.map().waitIdle();
+  loc.setInitialPose(truth(0.0));
+  int published = 0;
+  double last_published = 0.0, longest_unpublished = 0.0;
+  for (int i = 0; i <= 20; ++i) {
+    const double time = 0.5 * i;
+    const gpl::LocalizerOutput out =
+        loc.processScan(time, t::scanFrom(world, truth(time) * mount(), 30.0f, 0.01f, 900 + i), mount());
+    if (!out.publish) continue;
+    ++published;
+    longest_unpublished = std::max(longest_unpublished, time - last_published);
+    last_published = time;
+    EXPECT_TRUE(out.match_accepted) << "scan " << i;
+    EXPECT_LT(t::translationError(out.pose, truth(time)), 0.05) << "scan " << i;
+    EXPECT_LT(t::rotationError(out.pose, truth(time)), 1.0 * M_PI / 180.0) << "scan " << i;
+  }
+  EXPECT_GE(published, 7);  // about one scan in three: each recovery takes the next 1-1.5 s
+  EXPECT_LT(longest_unpublished, 2.0);
+}
+
+// With a gyro the heading is measured while no scan matches: the prediction is published while the gyro covers the
+// time since the last accepted match (the velocity is extrapolated for max_extrapolation), never more than
+// max_coast_time after it.
+TEST(Localizer, WithAGyroThePredictionIsPublishedForMaxCoastTime) {
+  const gpl::LocalizerConfig c = testConfig();
+  const gpl::PointCloud world = t::makeWorld();
+  const Eigen::Isometry3d truth = t::poseXYYaw(2.0, 1.0, 0.2);
+  gpl::Localizer loc(c);
+  loc.map().submit(gpl::MapChange::fullCloud(world));
+  loc.map().waitIdle();
+  loc.setInitialPose(truth);
+  for (int k = 0; k <= 500; ++k) loc.addGyro(0.01 * k, Eigen::Vector3d::Zero());  // standing still
+  const gpl::LocalizerOutput first =
+      loc.processScan(0.0, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 950), mount());
+  ASSERT_TRUE(first.match_accepted);
+  for (int i = 1; i <= 40; ++i) {
+    const double time = 0.1 * i;
+    // Nothing left to match (the sensor is covered): the pose is predicted.
+    const gpl::LocalizerOutput out = loc.processScan(time, gpl::PointCloud(), mount());
+    ASSERT_FALSE(out.match_accepted) << "scan " << i;
+    if (time <= c.prediction.max_extrapolation + 1e-9) EXPECT_TRUE(out.publish) << "scan " << i;
+    if (time > c.lost.max_coast_time + 1e-9) EXPECT_FALSE(out.publish) << "scan " << i;
+    if (out.publish) EXPECT_LT(t::translationError(out.pose, first.pose), 1e-6) << "scan " << i;  // held
+  }
 }
 
 // globalLocalize without any initial pose: the next scan starts from its answer.
