@@ -13,6 +13,7 @@
 #include "grid_puzzle_localization/global_localization.hpp"
 #include "grid_puzzle_localization/pcd_reader.hpp"
 #include "grid_puzzle_localization/preprocess.hpp"
+#include "option_values.hpp"
 
 namespace gpl = grid_puzzle_localization;
 
@@ -37,22 +38,8 @@ const char* kUsage =
     "  --print-config prints the search's defaults (max_range [m]: how far around the square the map is needed)\n"
     "Exit status: 0 found, 1 nothing acceptable (the reason is printed), 2 bad input.\n";
 
-struct UsageError : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
-
-double number(const std::string& option, const std::string& text) {
-  std::size_t used = 0;
-  double v = 0.0;
-  try {
-    v = std::stod(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used != text.size() || !std::isfinite(v))
-    throw UsageError("option " + option + " expects a finite number, got '" + text + "'");
-  return v;
-}
+using gpl::tools::number;
+using gpl::tools::UsageError;
 
 struct Args {
   std::vector<std::string> maps;

@@ -12,6 +12,7 @@
 #include "grid_puzzle_localization/pcd_reader.hpp"
 #include "grid_puzzle_localization/preprocess.hpp"
 #include "grid_puzzle_localization/rpy.hpp"
+#include "option_values.hpp"
 
 namespace gpl = grid_puzzle_localization;
 
@@ -30,29 +31,9 @@ const char* kUsage =
     "  --guess       initial T_target_source: metres and radians, ROS's fixed-axis roll pitch yaw,\n"
     "                T = t * Rz(yaw) * Ry(pitch) * Rx(roll)\n";
 
-struct UsageError : std::runtime_error {
-  using std::runtime_error::runtime_error;
-};
-
-double number(const std::string& option, const std::string& text) {
-  std::size_t used = 0;
-  double v = 0.0;
-  try {
-    v = std::stod(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used != text.size() || !std::isfinite(v))
-    throw UsageError("option " + option + " expects a finite number, got '" + text + "'");
-  return v;
-}
-
-int integer(const std::string& option, const std::string& text) {
-  const double v = number(option, text);
-  if (v != std::floor(v) || std::abs(v) > 1e9)
-    throw UsageError("option " + option + " expects an integer, got '" + text + "'");
-  return static_cast<int>(v);
-}
+using gpl::tools::integer;
+using gpl::tools::number;
+using gpl::tools::UsageError;
 
 struct Args {
   std::string target, source;
