@@ -4,10 +4,14 @@
 // Mode `repeat` is the control: the first scan, localised from the same initial pose at every scan slot against
 // the first window, which never changes. Its work is identical each time, so its latency spread is the
 // machine's own (scheduling, frequency, caches, other tenants), the floor under the other modes' p99 / p50.
+// Mode `replay` (bench/replay_scenario.py) runs a recording as fast as it goes against the whole map, from the
+// first scan's true pose, at the recording's own stamps: for tracking figures, not latency.
 //
-// Usage: bench_localizer INPUT.bin cloud|tiles|repeat [--tile-size S] [--window N] [--threads T] [--resolution R]
+// Usage: bench_localizer INPUT.bin cloud|tiles|repeat|replay [--tile-size S] [--window N] [--threads T] [--resolution
+// R]
 //                        [--max-range M] [--trace FILE]
-// --trace writes one CSV row per scan (latency, NDT iterations, prediction and ground-truth errors) to FILE.
+// --trace writes one CSV row per scan (latency, NDT iterations, prediction and ground-truth errors, whether the
+// match was accepted and the pose published) to FILE.
 // INPUT.bin (little endian) is written by bench/bench_localizer.py:
 //   char[8] "GPLBENCH"; f64 rate_hz; u64 n_map; f32 map[n_map][3]; f64 base_T_sensor[16] (row-major);
 //   u64 n_imu; f64 imu[n_imu][4] (stamp, gyro x y z in base_link [rad/s]);
@@ -197,15 +201,16 @@ int repeatFirstScan(gpl::Localizer& loc, const Input& input, const Scan& scan) {
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr,
-                 "usage: %s INPUT.bin cloud|tiles|repeat [--tile-size S] [--window N] [--threads T] [--resolution R] "
-                 "[--max-range M] [--trace FILE]\n",
-                 argv[0]);
+    std::fprintf(
+        stderr,
+        "usage: %s INPUT.bin cloud|tiles|repeat|replay [--tile-size S] [--window N] [--threads T] [--resolution R] "
+        "[--max-range M] [--trace FILE]\n",
+        argv[0]);
     return 2;
   }
   const std::string mode = argv[2];
-  if (mode != "cloud" && mode != "tiles" && mode != "repeat") {
-    std::fprintf(stderr, "bench_localizer: mode must be cloud, tiles or repeat (got '%s')\n", mode.c_str());
+  if (mode != "cloud" && mode != "tiles" && mode != "repeat" && mode != "replay") {
+    std::fprintf(stderr, "bench_localizer: mode must be cloud, tiles, repeat or replay (got '%s')\n", mode.c_str());
     return 2;
   }
   double tile_size = 10.0;
@@ -250,7 +255,12 @@ int main(int argc, char** argv) {
   // merged window as one cloud (a full rebuild per change), tiles mode gets the delta.
   std::set<TileKey> loaded;
   std::size_t updates = 0;
+  const bool replay = mode == "replay";
   auto follow = [&](const Eigen::Vector3d& at) {
+    if (replay) {
+      if (updates++ == 0) loc.map().submit(gpl::MapChange::fullCloud(input.map));
+      return;
+    }
     const std::set<TileKey> want = window(tiles, at, tile_size, half_window);
     if (want == loaded) return;
     if (mode == "cloud") {
@@ -284,7 +294,7 @@ int main(int argc, char** argv) {
     }
     trace << "scan,stamp_s,scan_ms,align_ms,cpu_ms,iterations,evaluations,source_points,update_pending,"
              "prediction_to_match_m,prediction_to_match_rad,prediction_error_m,prediction_error_rad,error_m,error_rad,"
-             "truth_yaw_rate_rad_s\n";
+             "truth_yaw_rate_rad_s,accepted,published,global_search,nvtl\n";
   }
   std::vector<double> latency, latency_pending, latency_quiet, cpu, update_ms, errors;
   double first_scan_ms = 0.0;
@@ -293,15 +303,19 @@ int main(int argc, char** argv) {
   auto next = std::chrono::steady_clock::now();
   std::size_t gyro_fed = 0;
   Eigen::Isometry3d last_truth = scan.truth;
+  double last_stamp = scan.stamp;
   for (std::uint64_t i = 0; i < input.scans; ++i) {
     if (i > 0) {
       last_truth = scan.truth;
+      last_stamp = scan.stamp;
       scan = readScan(input.rest);
     }
     for (; gyro_fed < input.gyro.size() && input.gyro[gyro_fed].stamp <= scan.stamp; ++gyro_fed)
       loc.addGyro(input.gyro[gyro_fed].stamp, input.gyro[gyro_fed].rate);
-    std::this_thread::sleep_until(next);
-    next += scanPeriod(input);
+    if (!replay) {
+      std::this_thread::sleep_until(next);
+      next += scanPeriod(input);
+    }
     const double cpu_start = threadCpuMs();
     const gpl::LocalizerOutput out = loc.processScan(scan.stamp, scan.points, input.base_T_sensor);
     const double cpu_ms = threadCpuMs() - cpu_start;
@@ -314,7 +328,8 @@ int main(int argc, char** argv) {
       (out.map_update_pending || out.map_swapped ? latency_pending : latency_quiet).push_back(out.scan_ms);
     }
     if (trace.is_open()) {
-      const double yaw_rate = i > 0 ? rotationAngle(last_truth, scan.truth) * input.rate_hz : 0.0;
+      const double dt = scan.stamp - last_stamp;
+      const double yaw_rate = dt > 0.0 ? rotationAngle(last_truth, scan.truth) / dt : 0.0;
       trace << i << ',' << scan.stamp << ',' << out.scan_ms << ',' << out.align_ms << ',' << cpu_ms << ','
             << out.ndt.iterations << ',' << out.ndt.evaluations << ',' << out.ndt.source_points << ','
             << (out.map_update_pending || out.map_swapped) << ','
@@ -323,7 +338,8 @@ int main(int argc, char** argv) {
             << (out.prediction.translation() - scan.truth.translation()).norm() << ','
             << rotationAngle(out.prediction, scan.truth) << ','
             << (out.pose.translation() - scan.truth.translation()).norm() << ',' << rotationAngle(out.pose, scan.truth)
-            << ',' << yaw_rate << '\n';
+            << ',' << yaw_rate << ',' << out.match_accepted << ',' << out.publish << ',' << out.global_search << ','
+            << out.ndt.nvtl << '\n';
     }
     if (!out.match_accepted) ++rejected;
     errors.push_back((out.pose.translation() - scan.truth.translation()).norm());

@@ -91,7 +91,7 @@ class PosePredictor {
 struct PredictionConfig {
   /// [s] > 0: past this time since the last accepted match the velocity is no longer extrapolated (a gap, a
   /// stop, a loss); the pose is searched around the last accepted one instead.
-  double max_extrapolation = 1.0;
+  double max_extrapolation = 2.0;
   /// [m/s] > 0: speed bound before a speed has been measured (the first scans after an initial pose).
   double max_speed = 15.0;
   /// [rad/s] > 0: yaw-rate bound before one has been measured, when no gyro covers the interval. Each 0.1 rad

@@ -22,12 +22,15 @@ VoxelMapParams workerParams(const LocalizerConfig& config) {
   return p;
 }
 
-// The search's NDT refinement runs on the localizer's target: same voxel parameters and search method.
+// The search's NDT refinement runs on the localizer's target: same voxel parameters and search method. Its map is
+// the target's voxel means, one point per NDT voxel: a search grid finer than the voxels would leave most cells of
+// a wall empty between the means, so the grid is at least as coarse as the voxels (and blurred in proportion).
 GlobalLocalizationConfig globalConfig(const LocalizerConfig& config) {
   GlobalLocalizationConfig g = config.global;
   const double epsilon = g.ndt.transformation_epsilon;
   g.ndt = config.ndt;
   g.ndt.transformation_epsilon = epsilon;
+  g.blur_sigma = std::max(g.blur_sigma, 0.5 * config.ndt.resolution);
   return g;
 }
 
@@ -44,6 +47,13 @@ Eigen::Isometry3d toIsometry(const Eigen::Matrix4f& m) {
   out.translation() = m.topRightCorner<3, 1>().cast<double>();
   out.linear() = Eigen::Quaterniond(m.topLeftCorner<3, 3>().cast<double>()).normalized().toRotationMatrix();
   return out;
+}
+
+// Two matches land on different poses: farther apart than `distance` [m], or turned by more than 0.1 rad.
+bool distinct(const NdtResult& a, const NdtResult& b, double distance) {
+  const Eigen::Isometry3d pa = toIsometry(a.transform), pb = toIsometry(b.transform);
+  return (pa.translation() - pb.translation()).norm() > distance ||
+         Eigen::AngleAxisd(pa.rotation().transpose() * pb.rotation()).angle() > 0.1;
 }
 
 // The pose covariance of an accepted match, in ROS's order and frame.
@@ -209,7 +219,9 @@ GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
   request.center_y = region.centre.translation().y();
   request.size = std::max(2.0 * region.radius, 2.0 * config_.search.step);
   request.yaw_center = std::atan2(region.centre.linear()(1, 0), region.centre.linear()(0, 0));
-  request.yaw_range = region.yaw_range >= M_PI ? 2.0 * M_PI : 2.0 * region.yaw_range;
+  // A known rotation is still searched over a few steps either side: the search's answer is refined by NDT.
+  request.yaw_range =
+      region.yaw_range >= M_PI ? 2.0 * M_PI : 2.0 * std::max(region.yaw_range, config_.hypotheses.yaw_step);
   r = global_.localize(source_, request);
   if (r.found && !acceptable(r.refinement)) {
     r.found = false;
@@ -381,44 +393,40 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   auto consider = [&](std::optional<NdtResult> r) {
     if (r && acceptable(*r) && reachable(*r) && (!best || r->nvtl > best->nvtl)) best = std::move(r);
   };
-  if (velocity_trusted) {
+  if (fresh) {
+    // A pose given by the user (rviz, a parameter) is matched from as given, the search only when that fails.
     out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
-    // Without a gyro a poor match is not taken even from the prediction: a yaw flip between scans (a hand-held
-    // swing reversing) lands in a false minimum at the predicted heading that still passes the absolute gate.
-    if (rotation_known || !poor(out.ndt)) consider(out.ndt);
-    if (poor(out.ndt)) {
-      // An alternative is taken only when it fits as well as the track did: a poor one is another false minimum.
+    consider(out.ndt);
+  } else if (velocity_trusted) {
+    out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
+    if (!poor(out.ndt)) {
+      consider(out.ndt);
+    } else {
+      // A poor match may be a false minimum (a hand-held swing reversing between scans without a gyro) or the
+      // scene may just have changed (real scans overlap the map unevenly). The hypotheses tell them apart: a
+      // distinct pose that fits better is taken when it fits as well as the track did, and refuses the
+      // prediction's match either way; when none fits better, the prediction's match stands.
       std::optional<NdtResult> alternative = tryHypotheses(guess, held, rotation_known, out);
-      if (alternative && !poor(*alternative)) consider(std::move(alternative));
+      const bool better_elsewhere =
+          alternative && alternative->nvtl > out.ndt.nvtl && distinct(*alternative, out.ndt, config_.search.step);
+      if (!better_elsewhere) consider(out.ndt);
+      if (alternative && (!better_elsewhere || !poor(*alternative))) consider(std::move(alternative));
     }
   }
-  // Past max_extrapolation (a gap, a loss) the region is large: the branch-and-bound search below covers it
-  // at a fraction of the grid's cost.
+  // No trusted prediction (start-up, a gap, a loss) or nothing fitted from it: the branch-and-bound search of the
+  // bounded region (every yaw after a gap when the rotation is not known), at most once per search_period.
   const bool long_gap = !fresh && elapsed > config_.prediction.max_extrapolation;
-  if ((!best || poor(*best)) && !long_gap) {
-    // No measured velocity yet (start-up) or the hypotheses did not help: search the bounded region.
-    SearchResult found = searchPose(aligner_, *target_, source_, region, config_.search,
-                                    [this](const NdtResult& m) { return acceptable(m); });
-    out.search_candidates = found.candidates;
-    out.search_ambiguous = found.ambiguous;
-    // Without a trusted prediction the search's answer is all there is: one scoring well below the last accepted
-    // match is a false minimum elsewhere (the scene does not change that much between scans), not the pose.
-    if (found.best && !poor(*found.best)) consider(std::move(found.best));
-    // The search saw a better fit than the best kept but could not tell it from another: nothing is sure.
-    if (found.ambiguous && best && found.best_nvtl > best->nvtl) best.reset();
-  }
+  const bool search_due = !long_gap || !last_global_search_ ||
+                          stamp - *last_global_search_ >= config_.lost.search_period || stamp < *last_global_search_;
   std::optional<Eigen::Isometry3d> found_globally;
-  if (!best && long_gap &&
-      (!last_global_search_ || stamp - *last_global_search_ >= config_.lost.search_period ||
-       stamp < *last_global_search_)) {
-    // Lost: the branch-and-bound search of the bounded region (every yaw when the rotation is not known).
+  if ((!best || poor(*best)) && search_due) {
     SearchRegion wide = region;
-    if (!rotation_known) wide.yaw_range = M_PI;
+    if (long_gap && !rotation_known) wide.yaw_range = M_PI;
     GlobalLocalizationResult g = searchGlobally(wide);
     last_global_search_ = stamp;
     out.global_search = true;
     out.global_search_reason = g.reason;
-    if (g.found) {
+    if (g.found && reachable(g.refinement)) {
       best = g.refinement;
       found_globally = g.map_T_base;
     }
@@ -436,9 +444,9 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   out.since_last_match = fresh ? 0.0 : elapsed;
   if (out.match_accepted) {
     out.recovered = !fresh && elapsed > config_.lost.max_coast_time;
-    // A jump found by the global search after a gap is a correction, not a motion to extrapolate: the
-    // velocity is measured again from the next match.
-    if (fresh || found_globally)
+    // A pose found after a gap is a correction, not a motion to extrapolate: the velocity is measured again
+    // from the next match. Within max_extrapolation of the last match it measures the motion like any match.
+    if (fresh || (found_globally && long_gap))
       predictor_.reset(out.pose, stamp);
     else
       predictor_.update(out.pose, stamp, config_.preprocess.deskew_twist_smoothing);
@@ -456,7 +464,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   }
   if (window_) {
     // A new start or a jump found by the global search begins a new window; the fused state replaces the match.
-    if (fresh || found_globally) window_->reset();
+    if (fresh || (found_globally && long_gap)) window_->reset();
     const Matrix6d information =
         out.match_accepted ? ndtInformation(out.pose, covarianceFromHessian(out.ndt.hessian, config_.covariance))
                            : Matrix6d::Zero();

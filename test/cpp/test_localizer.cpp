@@ -295,7 +295,7 @@ DriveRun drive(const gpl::LocalizerConfig& config, const Truth& truth, const std
         loc.processScan(time, t::scanFrom(world, truth(time) * mount(), 30.0f, 0.01f, 500 + i), mount());
     ++run.scans;
     run.hypotheses += out.hypotheses;
-    run.searches += out.search_candidates > 0;
+    run.searches += out.global_search;
     run.lost_seen = run.lost_seen || out.lost;
     if (out.publish && !out.match_accepted && last_accepted && time - *last_accepted > config.lost.max_coast_time)
       run.published_stale = true;
@@ -348,7 +348,7 @@ TEST(Localizer, StartWhileMovingFastWithSparseScans) {
   const DriveRun run = drive(testConfig(), truth, stamps(0.0, 3.5, 0.5), truth(0.0));
   EXPECT_EQ(run.accepted, run.scans);
   EXPECT_LT(run.worst_error, 0.05);
-  EXPECT_GT(run.outputs[1].search_candidates, 0);
+  EXPECT_TRUE(run.outputs[1].global_search);
 }
 
 // Issue 17 (hand-held): yaw swinging +-17 deg with a period of 1.3 s (up to 32 deg between scans, reversing)
@@ -371,7 +371,7 @@ TEST(Localizer, NoHypothesesOrSearchWhileTrackingIsGood) {
   const DriveRun run = drive(testConfig(), truthAt, stamps(0.0, 3.0, 0.1), truthAt(0.0));
   EXPECT_EQ(run.accepted, run.scans);
   EXPECT_EQ(run.hypotheses, 0);
-  EXPECT_EQ(run.searches, 2);  // the initial pose and the first scan without a measured velocity
+  EXPECT_EQ(run.searches, 1);  // the first scan without a measured velocity
 }
 
 // A start 30 m and 90 deg off: the localizer says it is lost and stops publishing after max_coast_time (it
