@@ -35,11 +35,11 @@ def write_input(scenario: Path, out: Path) -> int:
     topics = inputs.settings.get("topics") or {}
     points_topic = topics.get("points", "points")
     cloud = xyz_array(read_pcd(inputs.global_map).points).astype(np.float32)
-    base_T_sensor, gyro, scans = np.eye(4), [], []
+    mount, gyro, scans = np.eye(4), [], []
     with rosbag.Bag(str(inputs.bag)) as bag:
         for topic, msg, _ in bag.read_messages():
             if topic == "/tf_static":
-                base_T_sensor = _transform(msg.transforms[0].transform)
+                mount = _transform(msg.transforms[0].transform)
             elif msg._type == "sensor_msgs/Imu":
                 w = msg.angular_velocity
                 gyro.append([msg.header.stamp.to_sec(), w.x, w.y, w.z])
@@ -52,7 +52,7 @@ def write_input(scenario: Path, out: Path) -> int:
     with out.open("wb") as f:
         f.write(b"GPLBENCH" + np.float64(10.0).tobytes())
         f.write(np.uint64(len(cloud)).tobytes() + cloud.tobytes())
-        f.write(base_T_sensor.astype(np.float64).tobytes())
+        f.write(mount.astype(np.float64).tobytes())
         f.write(np.uint64(len(gyro)).tobytes() + np.asarray(gyro, dtype=np.float64).reshape(-1, 4).tobytes())
         f.write(np.uint64(len(scans)).tobytes())
         for i, (stamp, points) in enumerate(scans):
@@ -83,7 +83,7 @@ def main() -> int:
         json.dumps(
             {
                 "scenario": str(args.scenario),
-                "scans": int(len(rows)),
+                "scans": len(rows),
                 "accepted": int((rows["accepted"] > 0).sum()),
                 "published": int(published.sum()),
                 "global_searches": int((rows["global_search"] > 0).sum()),
