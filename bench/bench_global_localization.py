@@ -154,6 +154,10 @@ def summary(
         "median_rotation_error_deg": percentile([r["error_deg"] for r in accepted], 50),
         "median_cpu_seconds": percentile([r["cpu_seconds"] for r in rows], 50),
         "p95_cpu_seconds": percentile([r["cpu_seconds"] for r in rows], 95),
+        # Where the wall time goes (medians): likelihood grids + pyramid, branch and bound, NDT refinement.
+        "median_grid_seconds": percentile([r["grid_seconds"] for r in rows], 50),
+        "median_search_seconds": percentile([r["search_seconds"] for r in rows], 50),
+        "median_refine_seconds": percentile([r["refine_seconds"] for r in rows], 50),
         "median_candidates": percentile([r["candidates_evaluated"] for r in rows], 50),
         "refusals": dict(Counter(refusal_kind(r["reason"]) for r in rows if not r["found"])),
     }

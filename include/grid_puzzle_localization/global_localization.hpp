@@ -115,6 +115,9 @@ struct GlobalLocalizationResult {
   double confidence = 0.0;
   std::string reason;                    ///< empty when found, else why it was refused and what to do
   double seconds = 0.0;                  ///< wall time of localize()
+  double grid_seconds = 0.0;             ///< of which: likelihood grids and pyramid of the search area
+  double search_seconds = 0.0;           ///< of which: the branch-and-bound search
+  double refine_seconds = 0.0;           ///< of which: the NDT refinement of the candidates
   std::size_t candidates_evaluated = 0;  ///< search nodes scored (all levels); varies with threads
   std::size_t scan_points_used = 0;      ///< structure points of the scan the search matched
   NdtResult refinement;                  ///< the NDT refinement of the winner (status INVALID_INPUT if not run)

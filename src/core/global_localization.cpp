@@ -273,6 +273,13 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
   const int window = static_cast<int>(std::floor(request.size / r)) + 1;
   const int margin = static_cast<int>(std::ceil(reach / r)) + 1;
   const double x_lo = request.center_x - request.size / 2, y_lo = request.center_y - request.size / 2;
+  // Where the time goes (the result's grid, search and refine seconds).
+  auto stage = std::chrono::steady_clock::now();
+  auto lap = [&stage](double* seconds) {
+    const auto now = std::chrono::steady_clock::now();
+    *seconds = std::chrono::duration<double>(now - stage).count();
+    stage = now;
+  };
   BandGrids grids = bandGrids(map_->structure, cfg, x_lo - margin * r, y_lo - margin * r, window + 2 * margin + 1);
   if (grids.occupied == 0) {
     std::ostringstream msg;
@@ -284,6 +291,7 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
   }
   const int width = static_cast<int>(grids.values.size()) / grids.side;
   const LikelihoodPyramid pyramid(std::move(grids.values), width, grids.side, cfg.levels);
+  lap(&result.grid_seconds);
   BbsProblem problem;
   problem.pyramid = &pyramid;
   problem.width = problem.height = window;
@@ -303,6 +311,7 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
   const BbsOutcome outcome = branchAndBound(problem, min_score, cfg.max_runner_up_ratio,
                                             cfg.adapted_initial_score ? cfg.initial_descents : 0, cfg.threads);
   result.candidates_evaluated = outcome.evaluated;
+  lap(&result.search_seconds);
   if (outcome.leaves.empty()) {
     std::ostringstream msg;
     msg << "no pose in the search area scores min_score = " << cfg.min_score
@@ -357,6 +366,7 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
     }
     if (!same) answers.push_back(a);
   }
+  lap(&result.refine_seconds);
   if (answers.empty())
     return refused(result, "the NDT refinement failed for every candidate: the map around them has too few voxels",
                    start);

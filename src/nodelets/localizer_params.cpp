@@ -17,6 +17,14 @@ std::string text(const T& v) {
   return s.str();
 }
 
+std::string text(const std::vector<double>& v) {
+  std::ostringstream s;
+  s << "[";
+  for (std::size_t i = 0; i < v.size(); ++i) s << (i ? ", " : "") << v[i];
+  s << "]";
+  return s.str();
+}
+
 // Reads one parameter into `field` and checks the whole config: the config validates before each call, so
 // a new problem is this parameter's, and it stops the start-up with the parameter, its value and range.
 class CheckedLoader {
@@ -87,6 +95,31 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
   if (pnh.getParam("ndt/search_method", search) && !parseSearchMethod(search, &c.ndt.search))
     throw std::invalid_argument("~ndt/search_method '" + search +
                                 "' is unknown; use DIRECT1, DIRECT7, DIRECT27 or RADIUS");
+  // The branch-and-bound search (GlobalLocalizationConfig; its NDT is ndt/* above but for its own epsilon).
+  GlobalLocalizationConfig& gc = c.global;
+  load("global_localization/resolution", gc.resolution);
+  load("global_localization/ground_cell", gc.ground_cell);
+  load("global_localization/height_bands", gc.height_bands);
+  load("global_localization/band_overlap", gc.band_overlap);
+  load("global_localization/max_range", gc.max_range);
+  load("global_localization/max_scan_points", gc.max_scan_points);
+  load("global_localization/min_scan_points", gc.min_scan_points);
+  load("global_localization/blur_sigma", gc.blur_sigma);
+  load("global_localization/yaw_step", gc.yaw_step);
+  load("global_localization/levels", gc.levels);
+  load("global_localization/adapted_initial_score", gc.adapted_initial_score);
+  load("global_localization/initial_descents", gc.initial_descents);
+  load("global_localization/min_score", gc.min_score);
+  load("global_localization/max_runner_up_ratio", gc.max_runner_up_ratio);
+  load("global_localization/runner_up_distance", gc.runner_up_distance);
+  load("global_localization/runner_up_yaw", gc.runner_up_yaw);
+  load("global_localization/refine_candidates", gc.refine_candidates);
+  load("global_localization/same_pose_distance", gc.same_pose_distance);
+  load("global_localization/same_pose_yaw", gc.same_pose_yaw);
+  load("global_localization/transformation_epsilon", gc.ndt.transformation_epsilon);
+  load("global_localization/min_inlier_fraction", gc.min_inlier_fraction);
+  load("global_localization/max_refinement_shift", gc.max_refinement_shift);
+  load("global_localization/threads", gc.threads);
   load("map_update_threads", c.map_update_threads);
   load("match/min_nvtl", c.match.min_nvtl);
   load("match/min_transformation_probability", c.match.min_transformation_probability);

@@ -171,8 +171,10 @@ std::string json(const gpl::GlobalLocalizationResult& r, double cpu_seconds) {
      << ", \"z\": " << t.z() << ", \"roll\": " << roll << ", \"pitch\": " << pitch << ", \"yaw\": " << yaw
      << ", \"score\": " << r.score << ", \"runner_up_score\": " << r.runner_up_score << ", \"fit\": " << r.fit
      << ", \"runner_up_fit\": " << r.runner_up_fit << ", \"confidence\": " << r.confidence
-     << ", \"seconds\": " << r.seconds << ", \"candidates_evaluated\": " << r.candidates_evaluated
-     << ", \"scan_points_used\": " << r.scan_points_used << ", \"cpu_seconds\": " << cpu_seconds
+     << ", \"seconds\": " << r.seconds << ", \"grid_seconds\": " << r.grid_seconds
+     << ", \"search_seconds\": " << r.search_seconds << ", \"refine_seconds\": " << r.refine_seconds
+     << ", \"candidates_evaluated\": " << r.candidates_evaluated << ", \"scan_points_used\": " << r.scan_points_used
+     << ", \"cpu_seconds\": " << cpu_seconds
      << ", \"ndt_transformation_probability\": " << r.refinement.transformation_probability
      << ", \"ndt_inlier_fraction\": " << r.refinement.inlier_fraction << ", \"ndt_status\": \""
      << gpl::toString(r.refinement.status) << "\", \"reason\": \"" << reason << "\"}";

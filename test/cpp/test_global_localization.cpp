@@ -203,6 +203,11 @@ TEST_F(GlobalLocalizerTest, FindsAKnownPoseAnywhereInTheSearchSquareAndAnyYaw) {
   EXPECT_GT(r.score, r.runner_up_score);
   EXPECT_GT(r.confidence, 0.0);
   EXPECT_GT(r.candidates_evaluated, 0u);
+  // The stages are parts of the whole (each ran, and they do not overlap).
+  EXPECT_GT(r.grid_seconds, 0.0);
+  EXPECT_GT(r.search_seconds, 0.0);
+  EXPECT_GT(r.refine_seconds, 0.0);
+  EXPECT_LE(r.grid_seconds + r.search_seconds + r.refine_seconds, r.seconds);
 }
 
 TEST_F(GlobalLocalizerTest, UsesGravityForRollAndPitch) {
