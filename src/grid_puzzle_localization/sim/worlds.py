@@ -1,4 +1,5 @@
-"""Procedural worlds, deterministic by seed: ``courtyard`` (campus) and ``urban`` (city blocks).
+"""Procedural worlds, deterministic by seed: ``courtyard`` (campus), ``urban`` (city blocks) and ``corridor``
+(a road tunnel, degenerate along its axis).
 
 A world is a triangle mesh in the ``map`` frame (x east, y north, z up, metres, centred on the origin),
 an analytic ground height (so trajectories sit exactly on it) and the path network the trajectories
@@ -10,6 +11,9 @@ follow. ``scale`` shrinks the extent (and the number of blocks); object sizes st
 - urban, full scale about 480 m x 710 m: a 5 x 7 street grid (10-25 m wide) with a few diagonal
   streets, blocks of buildings with very different heights (6-100 m, some with setbacks), parks,
   street lights, street trees, parked cars, slopes up to about 4 %.
+- corridor, full scale about 1140 m x 30 m: one straight two-lane road tunnel (walls 6.5 m either side of the
+  centre line, a 6 m ceiling) whose only features along the axis are the portals and an emergency niche box
+  on a wall every 150-250 m: LiDAR constrains the along-tunnel position only near those.
 """
 
 from __future__ import annotations
@@ -303,7 +307,41 @@ def _split(rect, lot_range: tuple[float, float], rng: np.random.Generator):
         yield from _split((x0, cut, x1, y1), lot_range, rng)
 
 
-WORLDS: dict[str, Callable[[int, float], World]] = {"courtyard": courtyard, "urban": urban}
+CORRIDOR_LENGTH = 1100.0  # [m] of road between the portals' approaches at full scale
+
+
+def corridor(seed: int, scale: float) -> World:
+    rng = np.random.default_rng([seed, 303])
+    length = CORRIDOR_LENGTH * scale
+    half_road, wall_y, ceiling = 5.0, 6.5, 6.0
+    ext_x, ext_y = length + 40.0, 30.0
+    graph = PathGraph(
+        np.array([[-length / 2, 0.0], [length / 2, 0.0]]), np.array([[0, 1]], dtype=np.int64), np.array([half_road])
+    )
+    extent = (-ext_x / 2, -ext_y / 2, ext_x / 2, ext_y / 2)
+    ground = Ground(*rng.uniform(-0.005, 0.005, 2), 0.0, 300.0, 0.0, 0.0)  # a straight, nearly level road
+    b = MeshBuilder()
+    _ground_mesh(b, ground, extent, 2.0, graph, path_refl=0.1, other=0.25)
+    x0, x1 = -ext_x / 2 + 5.0, ext_x / 2 - 5.0  # the tunnel, between its portals
+    corners = ground.height(np.array([x0, x1, x0, x1]), np.array([-wall_y, -wall_y, wall_y, wall_y]))
+    zlo, ztop = float(corners.min()) - 0.5, float(corners.max()) + ceiling + 0.5
+    for side in (-1.0, 1.0):
+        b.add(meshes.box(x0, side * wall_y, x1, side * (wall_y + 0.5), zlo, ztop), 0.4)
+    # The ceiling follows the road's slope in 20 m slabs (a flat slab would meet a tilted road).
+    for xa in np.arange(x0, x1, 20.0):
+        xb = min(xa + 20.0, x1)
+        z = float(ground.height(np.array((xa + xb) / 2), np.array(0.0))) + ceiling
+        b.add(meshes.box(xa, -wall_y - 0.5, xb, wall_y + 0.5, z, z + 0.3), 0.3)
+    x, side = x0 + rng.uniform(80.0, 150.0), 1.0
+    while x < x1 - 10.0:  # emergency niches: a cabinet 2 m long standing 0.5 m out of a wall
+        y = side * (wall_y - 0.25)
+        z = float(ground.height(np.array(x), np.array(y)))
+        b.add(meshes.box(x - 1.0, y - 0.25, x + 1.0, y + 0.25, z - 0.1, z + 2.5), 0.7)
+        x, side = x + rng.uniform(150.0, 250.0), -side
+    return World("corridor", b.build(), ground, graph, extent)
+
+
+WORLDS: dict[str, Callable[[int, float], World]] = {"courtyard": courtyard, "urban": urban, "corridor": corridor}
 
 
 def check_world(name: str) -> str:
