@@ -258,7 +258,7 @@ SweepMotion Localizer::sweepMotion(double stamp, double t_begin, double t_end, c
                                    bool fresh, const std::optional<FusedState>& fused) const {
   // Right after an initial pose there is no motion estimate: the scan is taken as if the sensor stood still.
   Twist twist = fresh ? Twist::Zero() : predictor_.smoothedTwist();
-  if (fused) twist.head<3>() = fused->pose.rotation().transpose() * fused->velocity;
+  if (fused && !fresh) twist.head<3>() = fused->pose.rotation().transpose() * fused->velocity;
   if (fresh || !config_.imu.use_gyro || !gyro_.covers(stamp + t_begin, stamp + t_end, config_.imu.max_gap))
     return SweepMotion::fromTwist(twist, base_T_sensor, t_begin, t_end);
   auto rotation = [&](double t) {

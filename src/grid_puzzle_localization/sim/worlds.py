@@ -12,8 +12,10 @@ follow. ``scale`` shrinks the extent (and the number of blocks); object sizes st
   streets, blocks of buildings with very different heights (6-100 m, some with setbacks), parks,
   street lights, street trees, parked cars, slopes up to about 4 %.
 - corridor, full scale about 1140 m x 30 m: one straight two-lane road tunnel (walls 6.5 m either side of the
-  centre line, a 6 m ceiling) whose only features along the axis are the portals and an emergency niche box
-  on a wall every 150-250 m: LiDAR constrains the along-tunnel position only near those.
+  centre line, a 6 m ceiling) whose only features along the axis are the portals, a cross passage (a 5 m gap
+  in alternate walls into an 8 m deep chamber) every 100-160 m, an emergency cabinet on alternate walls every
+  40-70 m and a pair of jet fans under the ceiling every 90-130 m: between the passages LiDAR hardly
+  constrains the position along the tunnel.
 """
 
 from __future__ import annotations
@@ -325,19 +327,41 @@ def corridor(seed: int, scale: float) -> World:
     x0, x1 = -ext_x / 2 + 5.0, ext_x / 2 - 5.0  # the tunnel, between its portals
     corners = ground.height(np.array([x0, x1, x0, x1]), np.array([-wall_y, -wall_y, wall_y, wall_y]))
     zlo, ztop = float(corners.min()) - 0.5, float(corners.max()) + ceiling + 0.5
-    for side in (-1.0, 1.0):
-        b.add(meshes.box(x0, side * wall_y, x1, side * (wall_y + 0.5), zlo, ztop), 0.4)
+    # Cross passages: a 5 m gap in alternate walls every 100-160 m, into an 8 m deep chamber.
+    passages = {-1.0: [], 1.0: []}
+    x, side = x0 + rng.uniform(30.0, 80.0), 1.0
+    while x < x1 - 20.0:
+        passages[side].append(x)
+        x, side = x + rng.uniform(100.0, 160.0), -side
+    for side, gaps in passages.items():
+        start = x0
+        for xp in gaps:
+            b.add(meshes.box(start, side * wall_y, xp - 2.5, side * (wall_y + 0.5), zlo, ztop), 0.4)
+            far = side * (wall_y + 8.0)
+            b.add(meshes.box(xp - 3.0, far, xp + 3.0, far + side * 0.5, zlo, ztop), 0.4)
+            for xs in (xp - 3.0, xp + 2.5):
+                b.add(meshes.box(xs, side * wall_y, xs + 0.5, far, zlo, ztop), 0.4)
+            start = xp + 2.5
+        b.add(meshes.box(start, side * wall_y, x1, side * (wall_y + 0.5), zlo, ztop), 0.4)
     # The ceiling follows the road's slope in 20 m slabs (a flat slab would meet a tilted road).
     for xa in np.arange(x0, x1, 20.0):
         xb = min(xa + 20.0, x1)
         z = float(ground.height(np.array((xa + xb) / 2), np.array(0.0))) + ceiling
-        b.add(meshes.box(xa, -wall_y - 0.5, xb, wall_y + 0.5, z, z + 0.3), 0.3)
-    x, side = x0 + rng.uniform(80.0, 150.0), 1.0
-    while x < x1 - 10.0:  # emergency niches: a cabinet 2 m long standing 0.5 m out of a wall
+        b.add(meshes.box(xa, -wall_y - 8.5, xb, wall_y + 8.5, z, z + 0.3), 0.3)  # over the chambers too
+    x, side = x0 + rng.uniform(20.0, 60.0), 1.0
+    while x < x1 - 10.0:  # emergency cabinets, 2 m long, standing 0.5 m out of alternate walls
         y = side * (wall_y - 0.25)
         z = float(ground.height(np.array(x), np.array(y)))
         b.add(meshes.box(x - 1.0, y - 0.25, x + 1.0, y + 0.25, z - 0.1, z + 2.5), 0.7)
-        x, side = x + rng.uniform(150.0, 250.0), -side
+        x, side = x + rng.uniform(40.0, 70.0), -side
+    x = x0 + rng.uniform(50.0, 100.0)
+    while x < x1 - 10.0:  # jet fans: a pair of 1 m x 4 m cylinders under the ceiling
+        z = float(ground.height(np.array(x), np.array(0.0))) + ceiling
+        for y in (-2.5, 2.5):
+            v, f = meshes.prism(0.0, 0.0, 0.5, -2.0, 2.0, sides=8)
+            v = v[:, [2, 0, 1]] + np.array([x, y, z - 0.8])  # the prism's axis turned along x
+            b.add((v, f), 0.5)
+        x += rng.uniform(90.0, 130.0)
     return World("corridor", b.build(), ground, graph, extent)
 
 
