@@ -12,7 +12,7 @@ follow. ``scale`` shrinks the extent (and the number of blocks); object sizes st
   streets, blocks of buildings with very different heights (6-100 m, some with setbacks), parks,
   street lights, street trees, parked cars, slopes up to about 4 %.
 - corridor, full scale about 1140 m x 30 m: one straight two-lane road tunnel (walls 6.5 m either side of the
-  centre line, a 6 m ceiling) whose only features along the axis are the portals, a cross passage (a 5 m gap
+  centre line, a flat 6 m ceiling) whose only features along the axis are the portals, a cross passage (a 5 m gap
   in alternate walls into an 8 m deep chamber) every 100-160 m, an emergency cabinet on alternate walls every
   40-70 m and a pair of jet fans under the ceiling every 90-130 m: between the passages LiDAR hardly
   constrains the position along the tunnel.
@@ -343,11 +343,10 @@ def corridor(seed: int, scale: float) -> World:
                 b.add(meshes.box(xs, side * wall_y, xs + 0.5, far, zlo, ztop), 0.4)
             start = xp + 2.5
         b.add(meshes.box(start, side * wall_y, x1, side * (wall_y + 0.5), zlo, ztop), 0.4)
-    # The ceiling follows the road's slope in 20 m slabs (a flat slab would meet a tilted road).
-    for xa in np.arange(x0, x1, 20.0):
-        xb = min(xa + 20.0, x1)
-        z = float(ground.height(np.array((xa + xb) / 2), np.array(0.0))) + ceiling
-        b.add(meshes.box(xa, -wall_y - 8.5, xb, wall_y + 8.5, z, z + 0.3), 0.3)  # over the chambers too
+    # The ceiling is the (planar) road surface raised by `ceiling`, over the chambers too: no steps along x.
+    xs, ys = np.array([x0, x1]), np.array([-wall_y - 8.5, wall_y + 8.5])
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    b.add(meshes.heightfield(xs, ys, ground.height(gx, gy) + ceiling), 0.3)
     x, side = x0 + rng.uniform(20.0, 60.0), 1.0
     while x < x1 - 10.0:  # emergency cabinets, 2 m long, standing 0.5 m out of alternate walls
         y = side * (wall_y - 0.25)
