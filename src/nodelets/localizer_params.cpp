@@ -51,6 +51,7 @@ void loadFusion(const ros::NodeHandle& pnh, CheckedLoader& load, FusionConfig& f
     if (!parsed) throw std::invalid_argument("~fusion/mode '" + mode + "' is unknown; use none or sliding_window");
     f.mode = *parsed;
   }
+  load("fusion/ndt_covariance_scale", f.ndt_covariance_scale);
   SlidingWindowConfig& w = f.window;
   load("fusion/window/gravity", w.gravity);
   load("fusion/window/gyro_noise_density", w.gyro_noise_density);

@@ -24,6 +24,11 @@ std::optional<FusionMode> parseFusionMode(const std::string& name);
 struct FusionConfig {
   FusionMode mode = FusionMode::kNone;
   SlidingWindowConfig window;  ///< used when mode is kSlidingWindow; window.base_T_imu also turns the gyro
+  /// > 0: the NDT covariance (inverse Hessian) is multiplied by this before it weighs the match in the window.
+  /// The Hessian overstates what a scan fixes where the scene is degenerate: a voxel's Gaussian on a wall spans
+  /// the voxel along it, so every wall point adds curvature along a tunnel that nothing constrains. Measured in
+  /// the simulated corridor (docs/fusion.md): 1 lets matches that repeat the prediction pin the window.
+  double ndt_covariance_scale = 100.0;
 
   /// Empty when usable (the window is checked only when it is used).
   std::string validate() const;
@@ -64,6 +69,7 @@ class FusionTracker {
 
  private:
   Eigen::Isometry3d base_T_imu_;
+  double ndt_covariance_scale_;
   std::unique_ptr<SlidingWindow> window_;
 };
 

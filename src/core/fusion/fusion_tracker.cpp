@@ -1,5 +1,6 @@
 #include "grid_puzzle_localization/fusion/fusion_tracker.hpp"
 
+#include <cmath>
 #include <stdexcept>
 
 namespace grid_puzzle_localization {
@@ -13,12 +14,16 @@ std::optional<FusionMode> parseFusionMode(const std::string& name) {
 }
 
 std::string FusionConfig::validate() const {
-  if (mode == FusionMode::kSlidingWindow) return window.validate();
-  return window.base_T_imu.matrix().allFinite() ? "" : "fusion/window/base_T_imu must be finite; ";
+  std::string err;
+  if (!(ndt_covariance_scale > 0.0) || !std::isfinite(ndt_covariance_scale))
+    err += "fusion/ndt_covariance_scale must be > 0 (got " + std::to_string(ndt_covariance_scale) + "); ";
+  if (mode == FusionMode::kSlidingWindow) return err + window.validate();
+  return err + (window.base_T_imu.matrix().allFinite() ? "" : "fusion/window/base_T_imu must be finite; ");
 }
 
 FusionTracker::FusionTracker(const FusionConfig& config)
     : base_T_imu_(config.window.base_T_imu),
+      ndt_covariance_scale_(config.ndt_covariance_scale),
       window_(config.mode == FusionMode::kSlidingWindow ? std::make_unique<SlidingWindow>(config.window) : nullptr) {}
 
 FusionTracker::~FusionTracker() = default;
@@ -45,7 +50,8 @@ std::optional<Eigen::Isometry3d> FusionTracker::update(double stamp, bool restar
                                                        const Matrix6d& ndt_covariance) {
   if (!window_) return std::nullopt;
   if (restart) window_->reset();
-  const Matrix6d information = match ? ndtInformation(*match, ndt_covariance) : Matrix6d::Zero();
+  const Matrix6d information =
+      match ? ndtInformation(*match, ndt_covariance_scale_ * ndt_covariance) : Matrix6d::Zero();
   const std::optional<FusedState> fused = window_->addScan(stamp, match, information);
   if (!match || !fused || fused->stamp != stamp) return std::nullopt;
   return fused->pose;
