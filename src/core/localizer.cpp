@@ -448,7 +448,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     // A new start or a jump found by the global search begins a new window; the fused state replaces the match.
     const std::optional<Eigen::Isometry3d> fused = fusion_.update(
         stamp, fresh || found_globally, out.match_accepted ? &out.pose : nullptr,
-        out.match_accepted ? covarianceFromHessian(out.ndt.hessian, config_.covariance) : Matrix6d::Zero());
+        out.match_accepted ? fusion_.ndtCovariance(out.ndt.hessian, config_.covariance) : Matrix6d::Zero());
     if (fused) out.pose = *fused;
   }
   // A scan that no pose fits contradicts the prediction; only a gyro still measures the heading then. Without

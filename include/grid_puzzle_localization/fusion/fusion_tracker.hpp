@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "grid_puzzle_localization/fusion/sliding_window.hpp"
+#include "grid_puzzle_localization/pose_covariance.hpp"
 
 namespace grid_puzzle_localization {
 
@@ -24,7 +25,7 @@ std::optional<FusionMode> parseFusionMode(const std::string& name);
 struct FusionConfig {
   FusionMode mode = FusionMode::kNone;
   SlidingWindowConfig window;  ///< used when mode is kSlidingWindow; window.base_T_imu also turns the gyro
-  /// > 0: the NDT covariance (inverse Hessian) is multiplied by this before it weighs the match in the window.
+  /// > 0: multiplies covariance.scale for the NDT covariance that weighs a match in the window (ndtCovariance).
   /// The Hessian overstates what a scan fixes where the scene is degenerate: a voxel's Gaussian on a wall spans
   /// the voxel along it, so every wall point adds curvature along a tunnel that nothing constrains. Measured in
   /// the simulated corridor (docs/fusion.md): 1 lets matches that repeat the prediction pin the window.
@@ -50,6 +51,9 @@ class FusionTracker {
 
   /// The newest fused state propagated to `stamp` [s]; nothing when disabled or the window is empty.
   std::optional<FusedState> predict(double stamp) const;
+  /// The covariance of the NDT parameters that weighs a match with Hessian `hessian` in the window: `config`
+  /// with its scale times ndt_covariance_scale (the clamps of `config` apply to the scaled inverse).
+  Matrix6d ndtCovariance(const Matrix6d& hessian, CovarianceConfig config) const;
   /// Adds the scan at `stamp` [s]: `match` is the accepted NDT pose (nullptr when none was accepted) with the
   /// covariance of the NDT parameters `ndt_covariance` (see ndtInformation). `restart` begins a new window (a
   /// new initial pose, a jump found by the global search). Returns the fused pose at `stamp` when a match was

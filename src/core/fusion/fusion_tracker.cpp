@@ -50,11 +50,15 @@ std::optional<Eigen::Isometry3d> FusionTracker::update(double stamp, bool restar
                                                        const Matrix6d& ndt_covariance) {
   if (!window_) return std::nullopt;
   if (restart) window_->reset();
-  const Matrix6d information =
-      match ? ndtInformation(*match, ndt_covariance_scale_ * ndt_covariance) : Matrix6d::Zero();
+  const Matrix6d information = match ? ndtInformation(*match, ndt_covariance) : Matrix6d::Zero();
   const std::optional<FusedState> fused = window_->addScan(stamp, match, information);
   if (!match || !fused || fused->stamp != stamp) return std::nullopt;
   return fused->pose;
+}
+
+Matrix6d FusionTracker::ndtCovariance(const Matrix6d& hessian, CovarianceConfig config) const {
+  config.scale *= ndt_covariance_scale_;
+  return covarianceFromHessian(hessian, config);
 }
 
 void FusionTracker::mapSwitched() {
