@@ -10,7 +10,7 @@
 #include <vector>
 
 #include "grid_puzzle_localization/deskew.hpp"
-#include "grid_puzzle_localization/fusion/sliding_window.hpp"
+#include "grid_puzzle_localization/fusion/fusion_tracker.hpp"
 #include "grid_puzzle_localization/global_localization.hpp"
 #include "grid_puzzle_localization/map_update_worker.hpp"
 #include "grid_puzzle_localization/ndt.hpp"
@@ -69,18 +69,6 @@ struct LostConfig {
   double search_period = 1.0;
 
   std::string validate() const;
-};
-
-/// Pose tracking past the NDT match: none (NDT with the constant-velocity prediction) or the sliding-window
-/// factor graph with IMU preintegration (fusion/sliding_window.hpp).
-enum class FusionMode { kNone, kSlidingWindow };
-const char* toString(FusionMode mode);
-/// "none" or "sliding_window"; nothing for anything else.
-std::optional<FusionMode> parseFusionMode(const std::string& name);
-
-struct FusionConfig {
-  FusionMode mode = FusionMode::kNone;
-  SlidingWindowConfig window;  ///< used when mode is kSlidingWindow
 };
 
 struct LocalizerConfig {
@@ -179,8 +167,8 @@ class Localizer {
   /// A full IMU sample (IMU frame, see fusion.window.base_T_imu): its rate feeds the gyro prediction and, with
   /// fusion kSlidingWindow, the sample feeds the window. Scan thread only.
   void addImu(const ImuSample& sample);
-  /// Warnings of the fusion since the last call (IMU dropouts, refused stamps...). Scan thread only.
-  std::vector<std::string> takeFusionWarnings();
+  /// The fusion: IMU extrinsic from TF, wheel odometry, block switches, warnings. Scan thread only.
+  FusionTracker& fusion() { return fusion_; }
 
   /// Localises one scan taken at `stamp` [s]: `scan` in the sensor frame, `base_T_sensor` the mounting.
   /// `times` (optional, one per point) are the capture times [s] after `stamp`; with them and
@@ -214,8 +202,9 @@ class Localizer {
   std::optional<NdtResult> tryHypotheses(const Eigen::Isometry3d& guess, const Eigen::Isometry3d& held,
                                          bool rotation_known, LocalizerOutput& out);
   /// The predicted sensor motion over the sweep [stamp + t_begin, stamp + t_end]; gyro rotation when covered.
+  /// `fused` (the window's prediction) gives the linear velocity when there is one.
   SweepMotion sweepMotion(double stamp, double t_begin, double t_end, const Eigen::Isometry3d& base_T_sensor,
-                          bool fresh) const;
+                          bool fresh, const std::optional<FusedState>& fused) const;
 
   LocalizerConfig config_;
   Preprocessor preprocessor_;
@@ -225,7 +214,7 @@ class Localizer {
   std::shared_ptr<const VoxelMap> target_;
   PosePredictor predictor_;
   GyroIntegrator gyro_;
-  std::unique_ptr<SlidingWindow> window_;  // fusion kSlidingWindow only
+  FusionTracker fusion_;
   std::optional<Eigen::Isometry3d> pending_initial_pose_;
   std::optional<Eigen::Isometry3d> default_initial_pose_;
   std::optional<double> last_stamp_;

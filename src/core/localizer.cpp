@@ -113,20 +113,12 @@ std::string LocalizerConfig::validate() const {
   std::ostringstream err;
   err << preprocess.validate() << ndt.validate() << covariance.validate() << match.validate() << imu.validate()
       << prediction.validate() << hypotheses.validate() << search.validate() << lost.validate();
-  if (fusion.mode == FusionMode::kSlidingWindow) err << fusion.window.validate();
+  err << fusion.validate();
   const std::string global_problem = globalConfig(*this).validate();
   if (!global_problem.empty()) err << "global_localization: " << global_problem << "; ";
   if (!(map_update_threads >= 0)) err << "map_update_threads must be >= 0 (0 = all cores); ";
   if (!(time_jump_back > 0.0)) err << "time_jump_back must be > 0 s (got " << time_jump_back << "); ";
   return err.str();
-}
-
-const char* toString(FusionMode mode) { return mode == FusionMode::kSlidingWindow ? "sliding_window" : "none"; }
-
-std::optional<FusionMode> parseFusionMode(const std::string& name) {
-  if (name == "none") return FusionMode::kNone;
-  if (name == "sliding_window") return FusionMode::kSlidingWindow;
-  return std::nullopt;
 }
 
 const char* toString(LocalizerState state) {
@@ -146,9 +138,8 @@ Localizer::Localizer(const LocalizerConfig& config)
       preprocessor_(config.preprocess),
       aligner_(config.ndt),
       worker_(workerParams(config)),
-      global_(globalConfig(config)),
-      window_(config.fusion.mode == FusionMode::kSlidingWindow ? std::make_unique<SlidingWindow>(config.fusion.window)
-                                                               : nullptr) {}
+      fusion_(config.fusion),
+      global_(globalConfig(config)) {}
 
 void Localizer::setInitialPose(const Eigen::Isometry3d& map_T_base) { pending_initial_pose_ = map_T_base; }
 
@@ -162,17 +153,13 @@ void Localizer::addGyro(double stamp, const Eigen::Vector3d& angular_velocity) {
 }
 
 void Localizer::addImu(const ImuSample& sample) {
-  addGyro(sample.stamp, config_.fusion.window.base_T_imu.rotation() * sample.gyro);
-  if (window_) window_->addImu(sample);
-}
-
-std::vector<std::string> Localizer::takeFusionWarnings() {
-  return window_ ? window_->takeWarnings() : std::vector<std::string>();
+  addGyro(sample.stamp, fusion_.baseTImu().rotation() * sample.gyro);
+  fusion_.addImu(sample);
 }
 
 void Localizer::reset() {
   predictor_ = PosePredictor();
-  if (window_) window_->reset();
+  fusion_.reset();
   gyro_.clear();
   pending_initial_pose_ = default_initial_pose_;
   last_stamp_.reset();
@@ -241,6 +228,7 @@ GlobalLocalizationResult Localizer::globalLocalize(const SearchRegion& region) {
   last_covariance_ = matchCovariance(r.refinement, config_.covariance);
   reference_nvtl_ = r.refinement.nvtl;
   last_global_search_.reset();
+  fusion_.reset();  // the next scan starts a new window at the pose found
   return r;
 }
 
@@ -279,9 +267,10 @@ bool Localizer::acceptable(const NdtResult& r) const {
 }
 
 SweepMotion Localizer::sweepMotion(double stamp, double t_begin, double t_end, const Eigen::Isometry3d& base_T_sensor,
-                                   bool fresh) const {
+                                   bool fresh, const std::optional<FusedState>& fused) const {
   // Right after an initial pose there is no motion estimate: the scan is taken as if the sensor stood still.
-  const Twist twist = fresh ? Twist::Zero() : predictor_.smoothedTwist();
+  Twist twist = fresh ? Twist::Zero() : predictor_.smoothedTwist();
+  if (fused && !fresh) twist.head<3>() = fused->pose.rotation().transpose() * fused->velocity;
   if (fresh || !config_.imu.use_gyro || !gyro_.covers(stamp + t_begin, stamp + t_end, config_.imu.max_gap))
     return SweepMotion::fromTwist(twist, base_T_sensor, t_begin, t_end);
   auto rotation = [&](double t) {
@@ -348,9 +337,13 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   const bool velocity_trusted =
       predictor_.twistMeasured() && elapsed >= 0.0 && elapsed <= config_.prediction.max_extrapolation;
 
+  // With the window, its IMU-propagated state is the prediction (while the window holds a recent state).
+  const std::optional<FusedState> fused_prediction =
+      !fresh && elapsed <= config_.prediction.max_extrapolation ? fusion_.predict(stamp) : std::nullopt;
   if (config_.preprocess.deskew && times && times->size() == scan.size()) {
     const auto [t_begin, t_end] = timeSpan(*times);
-    const SweepMotion motion = sweepMotion(stamp, t_begin, t_end, base_T_sensor, fresh || !velocity_trusted);
+    const SweepMotion motion =
+        sweepMotion(stamp, t_begin, t_end, base_T_sensor, fresh || !velocity_trusted, fused_prediction);
     preprocessor_.apply(scan, source_, &out.preprocess, times, &motion);
   } else {
     preprocessor_.apply(scan, source_, &out.preprocess);
@@ -366,9 +359,6 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   // The last accepted pose, turned by the gyro when it covers the time since.
   Eigen::Isometry3d held = predictor_.pose();
   if (gyro_rotation) held.linear() = predictor_.pose().linear() * gyro_rotation->toRotationMatrix();
-  // With the window, its IMU-propagated state is the prediction (while the window holds a recent state).
-  const std::optional<FusedState> fused_prediction =
-      window_ && !fresh && elapsed <= config_.prediction.max_extrapolation ? window_->predict(stamp) : std::nullopt;
   const Eigen::Isometry3d guess = fused_prediction ? fused_prediction->pose
                                   : velocity_trusted
                                       ? predictor_.predict(stamp, gyro_rotation ? &*gyro_rotation : nullptr)
@@ -462,15 +452,12 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     out.covariance = coastingCovariance(last_covariance_, region, config_.covariance);
     out.twist_covariance = predictionCovariance(config_.covariance);
   }
-  if (window_) {
-    // A new start or a jump found by the global search begins a new window; the fused state replaces the match.
-    if (fresh || (found_globally && long_gap)) window_->reset();
-    const Matrix6d information =
-        out.match_accepted ? ndtInformation(out.pose, covarianceFromHessian(out.ndt.hessian, config_.covariance))
-                           : Matrix6d::Zero();
-    const std::optional<FusedState> fused =
-        window_->addScan(stamp, out.match_accepted ? &out.pose : nullptr, information);
-    if (fused && fused->stamp == stamp && out.match_accepted) out.pose = fused->pose;
+  if (fusion_.enabled()) {
+    // A new start or a jump found by the search after a gap begins a new window; the fused state replaces the match.
+    const std::optional<Eigen::Isometry3d> fused = fusion_.update(
+        stamp, fresh || (found_globally && long_gap), out.match_accepted ? &out.pose : nullptr,
+        out.match_accepted ? fusion_.ndtCovariance(out.ndt.hessian, config_.covariance) : Matrix6d::Zero());
+    if (fused) out.pose = *fused;
   }
   // A scan that no pose fits contradicts the prediction; only a gyro still measures the heading then. Without
   // one the predicted yaw is a guess (a hand-held swing reverses between scans, and poses sampled a swing period

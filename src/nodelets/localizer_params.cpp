@@ -1,6 +1,7 @@
 #include "localizer_params.hpp"
 
 #include <cmath>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <vector>
@@ -49,6 +50,41 @@ class CheckedLoader {
   LocalizerConfig& config_;
   std::string log_name_;
 };
+
+// fusion/mode first: the window's parameters are checked only when it runs.
+void loadFusion(const ros::NodeHandle& pnh, CheckedLoader& load, FusionConfig& f, LocalizerRosParams& p) {
+  std::string mode;
+  if (pnh.getParam("fusion/mode", mode)) {
+    const std::optional<FusionMode> parsed = parseFusionMode(mode);
+    if (!parsed) throw std::invalid_argument("~fusion/mode '" + mode + "' is unknown; use none or sliding_window");
+    f.mode = *parsed;
+  }
+  load("fusion/ndt_covariance_scale", f.ndt_covariance_scale);
+  SlidingWindowConfig& w = f.window;
+  load("fusion/window/gravity", w.gravity);
+  load("fusion/window/gyro_noise_density", w.gyro_noise_density);
+  load("fusion/window/accel_noise_density", w.accel_noise_density);
+  load("fusion/window/gyro_random_walk", w.gyro_random_walk);
+  load("fusion/window/accel_random_walk", w.accel_random_walk);
+  load("fusion/window/max_states", w.max_states);
+  load("fusion/window/reset_states", w.reset_states);
+  load("fusion/window/max_imu_gap", w.max_imu_gap);
+  load("fusion/window/zupt_max_speed", w.zupt_max_speed);
+  load("fusion/window/odom_translation_std", w.odom_translation_std);
+  load("fusion/window/odom_rotation_std", w.odom_rotation_std);
+  load("fusion/window/max_iterations", w.max_iterations);
+  std::vector<double> pose;
+  if (pnh.getParam("fusion/window/base_T_imu", pose) && !pose.empty()) {
+    bool finite = pose.size() == 6;
+    for (double v : pose) finite = finite && std::isfinite(v);
+    if (!finite)
+      throw std::invalid_argument(
+          "~fusion/window/base_T_imu must be 6 finite numbers [x y z roll pitch yaw] (m, rad), or [] to take the "
+          "IMU's pose in the base frame from TF");
+    w.base_T_imu = poseFromXyzRpy(XyzRpy(pose.data()));
+    p.imu_extrinsic_from_tf = false;
+  }
+}
 
 }  // namespace
 
@@ -132,6 +168,7 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
   load("imu/use_gyro", c.imu.use_gyro);
   load("imu/max_gap", c.imu.max_gap);
   load("time_jump_back", c.time_jump_back);
+  loadFusion(pnh, load, c.fusion, p);
 
   pnh.getParam("map_source", p.map_source);
   if (p.map_source != "cloud" && p.map_source != "tiles" && p.map_source != "pcd")

@@ -38,6 +38,8 @@ struct LocalizerRosParams {
   /// Per-point time field of the scans: FLOAT32/FLOAT64 [s] or UINT32 [ns] after header.stamp.
   std::string time_field = "time";
   GlobalLocalizationParams global_localization;
+  /// The IMU's pose in base_link comes from TF (the IMU messages' frame) unless ~fusion/window/base_T_imu is set.
+  bool imu_extrinsic_from_tf = true;
 };
 
 /// Reads every parameter from `pnh`. A value out of range or unusable (unknown map_source or search method,

@@ -12,6 +12,8 @@
 #include <tf2_ros/transform_broadcaster.h>
 #include <tf2_ros/transform_listener.h>
 
+#include <atomic>
+#include <cctype>
 #include <map>
 #include <memory>
 #include <optional>
@@ -22,6 +24,7 @@
 #include "grid_puzzle_localization/localizer.hpp"
 #include "grid_puzzle_localization/rpy.hpp"
 #include "grid_puzzle_localization/tile_delta_sequence.hpp"
+#include "imu_msg.hpp"
 #include "localizer_params.hpp"
 #include "ndt_status_msg.hpp"
 #include "point_cloud_msg.hpp"
@@ -64,11 +67,13 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     points_sub_ = nh.subscribe("points", 2, &NdtLocalizerNodelet::onPoints, this);
     initial_pose_sub_ = nh.subscribe("initialpose", 1, &NdtLocalizerNodelet::onInitialPose, this);
     imu_sub_ = nh.subscribe("imu", 200, &NdtLocalizerNodelet::onImu, this);
+    if (localizer_->fusion().enabled())
+      odom_in_sub_ = nh.subscribe("odom_in", 50, &NdtLocalizerNodelet::onOdometryIn, this);
     hint_sub_ = nh.subscribe("initialpose_hint", 1, &NdtLocalizerNodelet::onHint, this);
     global_srv_ = pnh.advertiseService("global_localize", &NdtLocalizerNodelet::onGlobalLocalize, this);
-    NODELET_INFO("%s: map source '%s', frames %s -> %s, resolution %.2f m, search %s", getName().c_str(),
+    NODELET_INFO("%s: map source '%s', frames %s -> %s, resolution %.2f m, search %s, fusion %s", getName().c_str(),
                  params_.map_source.c_str(), params_.map_frame.c_str(), params_.base_frame.c_str(),
-                 params_.core.ndt.resolution, toString(params_.core.ndt.search));
+                 params_.core.ndt.resolution, toString(params_.core.ndt.search), toString(params_.core.fusion.mode));
   }
 
   // --------------------------------------------------------------- map input (multi-threaded queue)
@@ -76,6 +81,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     if (!checkMapFrame(msg->header.frame_id, "map_cloud")) return;
     try {
       localizer_->map().submit(MapChange::fullCloud(fromMsg(*msg)));
+      ++map_clouds_;  // after the first, a new cloud is a block switch (block_map mode)
     } catch (const std::invalid_argument& e) {
       NODELET_ERROR("map_cloud: %s", e.what());
     }
@@ -148,11 +154,43 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   }
 
   void onImu(const sensor_msgs::Imu::ConstPtr& msg) {
-    const std::optional<Eigen::Isometry3d> base_T_imu = staticTransform(msg->header.frame_id);
-    if (!base_T_imu) return;
-    Eigen::Vector3d w;
-    tf2::fromMsg(msg->angular_velocity, w);
-    localizer_->addGyro(msg->header.stamp.toSec(), base_T_imu->linear() * w);
+    if (params_.imu_extrinsic_from_tf) {
+      const std::optional<Eigen::Isometry3d> base_T_imu = staticTransform(msg->header.frame_id);
+      if (!base_T_imu) return;
+      if (!base_T_imu->isApprox(localizer_->fusion().baseTImu())) localizer_->fusion().setBaseTImu(*base_T_imu);
+    }
+    localizer_->addImu(imuSampleFromMsg(*msg));
+    logFusionWarnings();
+  }
+
+  // Wheel odometry (odom_T_base) for the window's relative pose factors.
+  void onOdometryIn(const nav_msgs::Odometry::ConstPtr& msg) {
+    if (!msg->child_frame_id.empty() && msg->child_frame_id != params_.base_frame) {
+      NODELET_ERROR_THROTTLE(5.0, "odom_in is the pose of '%s' but ~base_frame is '%s'; odometry ignored",
+                             msg->child_frame_id.c_str(), params_.base_frame.c_str());
+      return;
+    }
+    Eigen::Isometry3d odom_T_base;
+    tf2::fromMsg(msg->pose.pose, odom_T_base);
+    if (!odom_T_base.matrix().allFinite()) {
+      NODELET_WARN_THROTTLE(5.0, "odom_in has a non-finite pose; ignored");
+      return;
+    }
+    localizer_->fusion().addOdometry(msg->header.stamp.toSec(), odom_T_base);
+  }
+
+  // Each kind of fusion warning (its text without the numbers) at most once per 5 s.
+  void logFusionWarnings() {
+    const ros::WallTime now = ros::WallTime::now();
+    for (const std::string& warning : localizer_->fusion().takeWarnings()) {
+      std::string kind;
+      for (char ch : warning)
+        if (!std::isdigit(static_cast<unsigned char>(ch))) kind += ch;
+      ros::WallTime& last = fusion_warned_[kind];
+      if (!last.isZero() && (now - last).toSec() < 5.0) continue;
+      last = now;
+      NODELET_WARN("fusion: %s", warning.c_str());
+    }
   }
 
   void onPoints(const sensor_msgs::PointCloud2::ConstPtr& msg) {
@@ -175,6 +213,12 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
           params_.time_field.c_str());
     const LocalizerOutput out =
         localizer_->processScan(msg->header.stamp.toSec(), scan, *base_T_sensor, times ? &*times : nullptr);
+    const int clouds = map_clouds_;
+    if (out.map_swapped && clouds != map_clouds_seen_) {
+      if (map_clouds_seen_ > 0) localizer_->fusion().mapSwitched();
+      map_clouds_seen_ = clouds;
+    }
+    logFusionWarnings();
     if (out.reset) NODELET_WARN("scan time went backwards (bag loop?): localizer reset");
     reportState(out.state);
     if (out.state == LocalizerState::kWaitingForInitialPose) maybeStartGlobalLocalization(msg->header.stamp);
@@ -341,10 +385,13 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   TileDeltaSequence tile_sequence_;                        // tile_delta callback only (never concurrent)
   std::optional<LocalizerState> last_state_;               // for logging each state change once
   bool odom_published_by_others_ = false;
-  ros::Time waiting_since_;              // first scan without an initial pose (automatic start)
-  std::optional<Eigen::Vector2d> hint_;  // last initialpose_hint (map frame)
+  std::atomic<int> map_clouds_{0};                      // map_cloud messages taken (multi-threaded queue)
+  int map_clouds_seen_ = 0;                             // scan thread: map_clouds_ at the last map swap
+  std::map<std::string, ros::WallTime> fusion_warned_;  // scan thread: last log time of each kind of warning
+  ros::Time waiting_since_;                             // first scan without an initial pose (automatic start)
+  std::optional<Eigen::Vector2d> hint_;                 // last initialpose_hint (map frame)
   ros::Publisher odom_pub_, status_pub_, aligned_pub_;
-  ros::Subscriber points_sub_, initial_pose_sub_, imu_sub_, map_sub_, hint_sub_;
+  ros::Subscriber points_sub_, initial_pose_sub_, imu_sub_, odom_in_sub_, map_sub_, hint_sub_;
   ros::ServiceServer global_srv_;
   ros::ServiceClient resend_client_;
 };

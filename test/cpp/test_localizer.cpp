@@ -81,10 +81,14 @@ TEST(Localizer, SlidingWindowFusionTracksGroundTruthWithImu) {
   };
   double worst = 0.0;
   int imu = 0;
-  for (int i = 0; i <= 40; ++i) {
+  auto scan = [&](int i) {
     const double time = 0.1 * i;
     for (; imu / 200.0 <= time + 1e-9; ++imu) loc.addImu(imuAt(imu / 200.0));
-    const gpl::LocalizerOutput out = loc.processScan(time, scanAt(world, time, 10 + i), mount());
+    return loc.processScan(time, scanAt(world, time, 10 + i), mount());
+  };
+  for (int i = 0; i <= 40; ++i) {
+    const double time = 0.1 * i;
+    const gpl::LocalizerOutput out = scan(i);
     ASSERT_EQ(out.state, gpl::LocalizerState::kTracking);
     ASSERT_TRUE(out.pose.matrix().allFinite());
     EXPECT_TRUE(out.match_accepted) << "scan " << i;
@@ -94,6 +98,19 @@ TEST(Localizer, SlidingWindowFusionTracksGroundTruthWithImu) {
     if (i >= 5) EXPECT_LT(t::translationError(out.prediction, truthAt(time)), 0.05) << "scan " << i;
   }
   EXPECT_LT(worst, 0.05);
+  // The window's life cycle: N_a states, N_r after a block switch (and tracking goes on), one after a new pose.
+  EXPECT_EQ(loc.fusion().states(), static_cast<std::size_t>(config.fusion.window.max_states));
+  loc.fusion().mapSwitched();
+  EXPECT_EQ(loc.fusion().states(), static_cast<std::size_t>(config.fusion.window.reset_states));
+  gpl::LocalizerOutput out = scan(41);
+  EXPECT_TRUE(out.match_accepted);
+  EXPECT_LT(t::translationError(out.pose, truthAt(4.1)), 0.05);
+  EXPECT_EQ(loc.fusion().states(), static_cast<std::size_t>(config.fusion.window.reset_states) + 1);
+  loc.setInitialPose(truthAt(4.2));
+  out = scan(42);
+  EXPECT_TRUE(out.match_accepted);
+  EXPECT_LT(t::translationError(out.pose, truthAt(4.2)), 0.05);
+  EXPECT_EQ(loc.fusion().states(), 1u);
   EXPECT_EQ(gpl::parseFusionMode("sliding_window"), gpl::FusionMode::kSlidingWindow);
   EXPECT_FALSE(gpl::parseFusionMode("ukf"));
 }

@@ -1,10 +1,13 @@
 """gpm experiment's inputs: scenario directories, presets and bad input, each with its message."""
 
+import dataclasses
+
 import pytest
 
 from grid_puzzle_localization.cli import build_parser, main
 from grid_puzzle_localization.commands.experiment import config_from_args
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.experiment.runner import launch_args
 from grid_puzzle_localization.experiment.scenario import read_scenario
 
 
@@ -76,3 +79,18 @@ def test_without_ground_truth_an_initial_pose_is_needed(tmp_path, capsys):
     d = scenario_dir(tmp_path, gt=False)
     assert main(["experiment", str(d), "-o", str(tmp_path / "out")]) == 2
     assert "--initial-pose" in capsys.readouterr().err
+
+
+def test_fusion_reaches_the_localizer_launch(tmp_path):
+    d = scenario_dir(tmp_path)
+    cfg = config_from_args(build_parser().parse_args(["experiment", str(d), "-o", "out", "--fusion", "sliding_window"]))
+    cfg.check()
+    assert launch_args(cfg, "global", None, [0.0] * 6)["fusion"] == "sliding_window"
+    default = config_from_args(build_parser().parse_args(["experiment", str(d), "-o", "out"]))
+    assert default.fusion is None and "fusion" not in launch_args(default, "global", None, [0.0] * 6)
+
+
+def test_unknown_fusion_is_refused(tmp_path):
+    cfg = config_from_args(build_parser().parse_args(["experiment", str(scenario_dir(tmp_path)), "-o", "out"]))
+    with pytest.raises(UserError, match="unknown fusion 'ukf' \\(use none, sliding_window\\)"):
+        dataclasses.replace(cfg, fusion="ukf").check()

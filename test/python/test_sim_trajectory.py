@@ -107,7 +107,7 @@ def test_stationary_imu_reads_gravity_only():
     np.testing.assert_allclose(velocity, 0.0, atol=1e-12)
 
 
-@pytest.mark.parametrize("name", ["courtyard", "urban"])
+@pytest.mark.parametrize("name", ["courtyard", "urban", "corridor"])
 def test_worlds_and_routes_build_for_many_seeds_and_scales(name):
     for seed in range(4):
         for scale in (0.2, 0.25, 0.3, 0.37, 0.6, 1.0):
@@ -118,6 +118,22 @@ def test_worlds_and_routes_build_for_many_seeds_and_scales(name):
             if scale <= 0.3:
                 traj = localization_trajectory(world, scale, _rng(seed, 1))
                 assert traj.length() == pytest.approx(PROFILES[name].length * scale, rel=0.02)
+
+
+def test_corridor_is_a_straight_tunnel_driven_end_to_end_at_10_to_15_m_s():
+    world = worlds.make_world("corridor", 0, 1.0)
+    traj = localization_trajectory(world, 1.0, _rng(0, 1))
+    assert traj.length() == pytest.approx(1000.0, rel=0.02)
+    speed = np.linalg.norm(np.diff(traj.position[:, :2], axis=0), axis=1) * RATE
+    cruising = speed[np.argmax(speed > 10.0) : len(speed) - np.argmax(speed[::-1] > 10.0)]
+    assert cruising.min() >= 9.9 and speed.max() <= 15.0  # traffic: the speed varies, it does not stop
+    assert cruising.max() - cruising.min() > 3.0
+    assert len(cruising) / RATE > 0.9 * (traj.duration - 20.0)  # all but the start and the end
+    np.testing.assert_allclose(traj.position[:, 1], traj.position[0, 1], atol=1e-9)  # one straight lane
+    mapping = mapping_trajectory(world, traj, _rng(0, 2))
+    assert np.sign(mapping.position[-1, 0] - mapping.position[0, 0]) == -np.sign(
+        traj.position[-1, 0] - traj.position[0, 0]
+    )
 
 
 def test_frames_are_the_interpolated_poses_as_rotation_matrices():

@@ -19,10 +19,10 @@ import numpy as np
 import rospy
 import rostest
 from fixtures import synthetic_scene as ss
+from fixtures.odometry_track import OdometryTrack, angle_between
 from fixtures.synthetic_bag import write_drive_bag, xyz_cloud
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from grid_puzzle_localization.msg import NdtStatus, TileDelta
-from nav_msgs.msg import Odometry
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger, TriggerResponse
@@ -102,23 +102,6 @@ class TileDeltaPublisher:
             self.pub.publish(msg)
 
 
-class Trajectory:
-    def __init__(self, topic: str) -> None:
-        self.poses: dict[float, np.ndarray] = {}
-        self.sub = rospy.Subscriber(topic, Odometry, self._on)
-
-    def _on(self, msg: Odometry) -> None:
-        p, o = msg.pose.pose.position, msg.pose.pose.orientation
-        m = np.eye(4)
-        m[:3, :3] = Rotation.from_quat([o.x, o.y, o.z, o.w]).as_matrix()
-        m[:3, 3] = [p.x, p.y, p.z]
-        self.poses[round(msg.header.stamp.to_sec(), 3)] = m
-
-
-def angle_between(a: np.ndarray, b: np.ndarray) -> float:
-    return float(Rotation.from_matrix(a[:3, :3].T @ b[:3, :3]).magnitude())
-
-
 class NdtLocalizerTest(unittest.TestCase):
     @classmethod
     def setUpClass(cls) -> None:
@@ -129,7 +112,7 @@ class NdtLocalizerTest(unittest.TestCase):
         bag = Path(cls.tmp.name) / "drive.bag"
         write_drive_bag(bag, cls.scene, cls.drive, start=START)
         map_points = ss.sample_map(cls.scene)
-        cls.tracks = {name: Trajectory(f"/{name}/odom") for name in ("cloud", "tiles", "offset")}
+        cls.tracks = {name: OdometryTrack(f"/{name}/odom") for name in ("cloud", "tiles", "offset")}
         cls.statuses: list[NdtStatus] = []
         rospy.Subscriber("/tiles/ndt_localizer/status", NdtStatus, cls.statuses.append)
         cls.tiles = TileDeltaPublisher(map_points, Path(cls.tmp.name) / "tiles")

@@ -91,6 +91,9 @@ class SlidingWindow {
   explicit SlidingWindow(const SlidingWindowConfig& config);
   ~SlidingWindow();
   const SlidingWindowConfig& config() const { return config_; }
+  /// The IMU's pose in base_link for the samples added from now on (known once TF has the IMU frame).
+  /// Throws std::invalid_argument when not finite.
+  void setBaseTImu(const Eigen::Isometry3d& base_T_imu);
 
   /// Buffers a sample. A sample not newer than the last one (out of order, duplicated) or not finite is
   /// dropped with a warning; returns false then.

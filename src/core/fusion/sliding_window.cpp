@@ -91,6 +91,11 @@ SlidingWindow::SlidingWindow(const SlidingWindowConfig& config)
 
 SlidingWindow::~SlidingWindow() = default;
 
+void SlidingWindow::setBaseTImu(const Eigen::Isometry3d& base_T_imu) {
+  if (!base_T_imu.matrix().allFinite()) throw std::invalid_argument("fusion config: base_T_imu must be finite");
+  config_.base_T_imu = base_T_imu;
+}
+
 void SlidingWindow::warn(const std::string& message) { warnings_.push_back(message); }
 
 std::vector<std::string> SlidingWindow::takeWarnings() {

@@ -12,6 +12,7 @@ from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation.storage import storage_figures
 from grid_puzzle_localization.experiment.config import (
     DEFAULT_MODES,
+    FUSIONS,
     MODES,
     PRESETS,
     ExperimentConfig,
@@ -56,6 +57,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="monitor sampling period [s] (default %(default)s)",
     )  # fmt: skip
     parser.add_argument("--ndt-threads", type=int, help="NDT threads, 0 = all cores (default: the localizer's)")
+    parser.add_argument(
+        "--fusion", choices=FUSIONS,
+        help="pose tracking past the NDT match: sliding_window fuses the bag's imu (default: the localizer's, none)",
+    )  # fmt: skip
     parser.add_argument(
         "--initial-pose", type=float, nargs=6, metavar=("X", "Y", "Z", "ROLL", "PITCH", "YAW"),
         help="start pose [m, rad] (default: the first ground-truth pose)",
@@ -102,6 +107,7 @@ def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
         max_time_diff_s=args.max_time_diff,
         settle_s=args.settle,
         ndt_threads=args.ndt_threads,
+        fusion=args.fusion,
         initial_pose=list(args.initial_pose) if args.initial_pose else None,
         roles=NodeRoles(args.localizer_node, args.provider_node, args.block_server_node),
         scenario_name=scenario.name if scenario else "custom",

@@ -17,7 +17,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "-o", "--output", help="output directory (default: ./<scenario>); must be absent or empty unless --force"
     )
     parser.add_argument(
-        "--sensor", help=f"LiDAR model: {', '.join(SENSORS)} (default: livox for courtyard, hdl32 for urban)"
+        "--sensor",
+        help=f"LiDAR model: {', '.join(SENSORS)} (default: livox for courtyard, hdl32 for urban and corridor)",
     )
     parser.add_argument(
         "--seed", type=int, default=ScenarioConfig.seed,
@@ -29,7 +30,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )  # fmt: skip
     parser.add_argument("--duration", type=float, help="seconds of the localization run (default: the whole route)")
     parser.add_argument(
-        "--map-density", type=float, help="voxel size of the prior map [m] (default 0.05 courtyard, 0.1 urban)"
+        "--map-density",
+        type=float,
+        help="voxel size of the prior map [m] (default 0.05 courtyard, 0.1 urban and corridor)",
     )
     parser.add_argument(
         "--start-time", type=float, default=ScenarioConfig.start_time,
@@ -38,7 +41,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--movers",
         type=int,
-        help="moving pedestrians/cars in the scans, not in the map (default 12 x scale / 20 x scale in urban)",
+        help="moving pedestrians/cars in the scans, not in the map "
+        "(default 12 x scale, 20 x scale in urban, none in corridor)",
     )
     parser.add_argument(
         "--threads", type=int, default=ScenarioConfig.threads,

@@ -10,6 +10,7 @@ from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.provider.window import PRESETS as PAPER_WINDOWS
 
 MODES = ("global", "grid_puzzle", "block_map")
+FUSIONS = ("none", "sliding_window")  # the localizer's fusion/mode
 
 
 @dataclass(frozen=True)
@@ -61,6 +62,7 @@ class ExperimentConfig:
     startup_timeout_s: float = 60.0
     settle_s: float = 2.0  # after the nodes are up, and after the bag ends
     ndt_threads: int | None = None  # OpenMP threads of the NDT, 0 = all cores; None: the localizer's default
+    fusion: str | None = None  # FUSIONS: pose tracking past the NDT match; None: the localizer's default
     initial_pose: list[float] | None = None  # x y z roll pitch yaw [m, rad]; None: first ground-truth pose
     roles: NodeRoles = field(default_factory=NodeRoles)
     launch_file: str = "localization.launch"  # of this package, or an absolute path
@@ -86,6 +88,8 @@ class ExperimentConfig:
             )
         if self.ndt_threads is not None and self.ndt_threads < 0:
             raise UserError(f"--ndt-threads must be >= 0, 0 = all cores (got {self.ndt_threads})")
+        if self.fusion is not None and self.fusion not in FUSIONS:
+            raise UserError(f"unknown fusion '{self.fusion}' (use {', '.join(FUSIONS)})")
         if not self.block_size_m > 0:
             raise UserError(f"--block-size must be > 0 m (got {self.block_size_m})")
         if self.initial_pose is None and self.ground_truth is None:

@@ -64,6 +64,8 @@ def launch_args(cfg: ExperimentConfig, mode: str, tiles: Path | None, initial_po
     }
     if cfg.ndt_threads is not None:  # else the localizer's own default
         args["ndt_threads"] = cfg.ndt_threads
+    if cfg.fusion is not None:  # else the localizer's own default
+        args["fusion"] = cfg.fusion
     if tiles is not None:
         args["tiles"] = tiles.resolve()
     if mode == "block_map":
@@ -182,6 +184,7 @@ def run_experiment(cfg: ExperimentConfig, tiles: Path | None, storage: dict | No
         "grid_size_m": cfg.window.grid_size_m,
         "rate": cfg.rate,
         "ndt_threads": cfg.ndt_threads,
+        "fusion": cfg.fusion if cfg.fusion is not None else "localizer default",
         "monitor_interval_s": cfg.monitor_interval_s,
         "bag": str(cfg.bag),
     }

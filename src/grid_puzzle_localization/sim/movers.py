@@ -24,7 +24,8 @@ CAR = MotionProfile(0.0, 6.0, 9.0, 2.5, 1.5, 2.5, 2.0, 0.3, (3.0, 10.0), 8.0, 0.
 # Pedestrians keep left: beside the walkway centre in the courtyard, on the sidewalk of narrow streets.
 PEDESTRIAN_LANE = {"courtyard": -0.8, "urban": -6.0}  # [m] right of the centre line
 CLEARANCE = {"pedestrian": 1.0, "car": 4.0}  # [m] horizontal, from the sensor
-DEFAULT_COUNT = {"courtyard": {"pedestrian": 12}, "urban": {"car": 12, "pedestrian": 8}}  # at scale 1
+# At scale 1. The tunnel has none: its one road has no room to turn, so a random route could not continue.
+DEFAULT_COUNT = {"courtyard": {"pedestrian": 12}, "urban": {"car": 12, "pedestrian": 8}, "corridor": {}}
 
 
 def _templates() -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -86,6 +87,8 @@ def make_movers(world: World, scale: float, duration: float, count: int | None, 
     ``count`` of them in the same proportions."""
     mix = DEFAULT_COUNT[world.name]
     total = sum(mix.values())
+    if total == 0:
+        return Movers(world.ground, [], [], np.zeros(0))
     wanted = max(1, round(total * scale)) if count is None else count
     kinds = [k for k, n in mix.items() for _ in range(n)]
     kinds = [kinds[(i * total) // wanted % total] for i in range(wanted)]  # keeps the mix's proportions

@@ -39,8 +39,8 @@ from grid_puzzle_localization.sim.worlds import check_world, make_world
 from grid_puzzle_localization.util.atomic import atomic_directory, check_output_dir
 
 # base_link -> lidar per platform [m]: a backpack for the courtyard walk, a roof mount for the car.
-MOUNTS = {"courtyard": (0.2, 0.0, 1.3), "urban": (0.3, 0.0, 1.8)}
-DEFAULT_MAP_LEAF = {"courtyard": 0.05, "urban": 0.1}  # [m]
+MOUNTS = {"courtyard": (0.2, 0.0, 1.3), "urban": (0.3, 0.0, 1.8), "corridor": (0.3, 0.0, 1.8)}
+DEFAULT_MAP_LEAF = {"courtyard": 0.05, "urban": 0.1, "corridor": 0.1}  # [m]
 GROUND_TRUTH_RATE = 100.0  # [Hz] ground_truth topic and ground_truth.tum
 FILES = ("scenario.yaml", "ground_truth.tum", "scenario.bag", "global_map.pcd")
 

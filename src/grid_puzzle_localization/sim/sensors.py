@@ -129,7 +129,7 @@ SENSORS: dict[str, Lidar] = {
     "hdl32": SpinningLidar("hdl32", rate=10.0, min_range=0.5, max_range=100.0, range_sigma=0.02, dropout=0.02),
     "livox": NonRepetitiveLidar("livox", rate=10.0, min_range=0.1, max_range=70.0, range_sigma=0.02, dropout=0.02),
 }
-DEFAULT_SENSOR = {"courtyard": "livox", "urban": "hdl32"}
+DEFAULT_SENSOR = {"courtyard": "livox", "urban": "hdl32", "corridor": "hdl32"}
 
 
 def get_sensor(name: str) -> Lidar:

@@ -45,6 +45,9 @@ class MotionProfile:
     stop_backoff: float  # stop this far before the corner
     speed_step: float  # arc-length step of the speed profile
     smooth_sigma: float
+    # Traffic: the cruise speed dips by up to this fraction, as a cosine of the arc length with this wavelength.
+    cruise_dip: float = 0.0
+    dip_wavelength: float = 150.0
 
 
 PROFILES: dict[str, MotionProfile] = {
@@ -52,6 +55,8 @@ PROFILES: dict[str, MotionProfile] = {
     "courtyard": MotionProfile(650.0, 0.512, 1.5, 0.6, 0.5, 0.7, 0.4, 0.08, (2.0, 6.0), 0.0, 0.1, 0.25),
     # A car in traffic: ~3.6 km at ~4.6 m/s average (~785 s), stops at some crossings.
     "urban": MotionProfile(3600.0, 4.6, 9.0, 2.5, 1.5, 2.5, 2.0, 0.3, (3.0, 15.0), 8.0, 0.25, 0.2),
+    # A car through a road tunnel in traffic: ~1 km at ~11 m/s average, between about 10 and 15 m/s, no stops.
+    "corridor": MotionProfile(1000.0, 11.0, 9.0, 2.0, 1.5, 2.5, 2.0, 0.0, (3.0, 15.0), 0.0, 0.25, 0.2, 0.33, 150.0),
 }
 
 
@@ -222,7 +227,12 @@ def _rounded_curve(p: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray
 def _speed_profile(kappa: np.ndarray, stops: np.ndarray, cruise: float, prof: MotionProfile) -> np.ndarray:
     """Speed [m/s] at samples ``prof.speed_step`` apart: curvature and stop limits, then acceleration
     limits forwards and decelerations backwards; zero at both ends."""
-    v = np.minimum(cruise, np.sqrt(prof.lat_accel / np.maximum(kappa, 1e-9)))
+    dip = (
+        prof.cruise_dip
+        * 0.5
+        * (1.0 - np.cos(2 * np.pi * np.arange(len(kappa)) * prof.speed_step / prof.dip_wavelength))
+    )
+    v = np.minimum(cruise * (1.0 - dip), np.sqrt(prof.lat_accel / np.maximum(kappa, 1e-9)))
     v[stops] = 0.0
     v[0] = v[-1] = 0.0
     two_a, two_d = 2 * prof.accel * prof.speed_step, 2 * prof.decel * prof.speed_step
@@ -314,7 +324,9 @@ def localization_trajectory(world: World, scale: float, rng: np.random.Generator
     """The route driven while localizing: ``PROFILES[world.name].length * scale`` metres."""
     prof = PROFILES[world.name]
     length = prof.length * scale
-    return make_trajectory(world.graph, world.ground, plan_route(world.graph, length, rng), prof, length, rng)
+    # A world of one road (the tunnel) is driven end to end: a random walk would have to turn round in it.
+    route = [0, 1] if len(world.graph.edges) == 1 else plan_route(world.graph, length, rng)
+    return make_trajectory(world.graph, world.ground, route, prof, length, rng)
 
 
 def mapping_trajectory(world: World, loc: Trajectory, rng: np.random.Generator) -> Trajectory:

@@ -1,4 +1,5 @@
-"""Procedural worlds, deterministic by seed: ``courtyard`` (campus) and ``urban`` (city blocks).
+"""Procedural worlds, deterministic by seed: ``courtyard`` (campus), ``urban`` (city blocks) and ``corridor``
+(a road tunnel, degenerate along its axis).
 
 A world is a triangle mesh in the ``map`` frame (x east, y north, z up, metres, centred on the origin),
 an analytic ground height (so trajectories sit exactly on it) and the path network the trajectories
@@ -10,6 +11,11 @@ follow. ``scale`` shrinks the extent (and the number of blocks); object sizes st
 - urban, full scale about 480 m x 710 m: a 5 x 7 street grid (10-25 m wide) with a few diagonal
   streets, blocks of buildings with very different heights (6-100 m, some with setbacks), parks,
   street lights, street trees, parked cars, slopes up to about 4 %.
+- corridor, full scale about 1140 m x 30 m: one straight two-lane road tunnel (walls 6.5 m either side of the
+  centre line, a flat 6 m ceiling) whose only features along the axis are the portals, a cross passage (a 5 m gap
+  in alternate walls into an 8 m deep chamber) every 100-160 m, an emergency cabinet on alternate walls every
+  40-70 m and a pair of jet fans under the ceiling every 90-130 m: between the passages LiDAR hardly
+  constrains the position along the tunnel.
 """
 
 from __future__ import annotations
@@ -303,7 +309,62 @@ def _split(rect, lot_range: tuple[float, float], rng: np.random.Generator):
         yield from _split((x0, cut, x1, y1), lot_range, rng)
 
 
-WORLDS: dict[str, Callable[[int, float], World]] = {"courtyard": courtyard, "urban": urban}
+CORRIDOR_LENGTH = 1100.0  # [m] of road between the portals' approaches at full scale
+
+
+def corridor(seed: int, scale: float) -> World:
+    rng = np.random.default_rng([seed, 303])
+    length = CORRIDOR_LENGTH * scale
+    half_road, wall_y, ceiling = 5.0, 6.5, 6.0
+    ext_x, ext_y = length + 40.0, 30.0
+    graph = PathGraph(
+        np.array([[-length / 2, 0.0], [length / 2, 0.0]]), np.array([[0, 1]], dtype=np.int64), np.array([half_road])
+    )
+    extent = (-ext_x / 2, -ext_y / 2, ext_x / 2, ext_y / 2)
+    ground = Ground(*rng.uniform(-0.005, 0.005, 2), 0.0, 300.0, 0.0, 0.0)  # a straight, nearly level road
+    b = MeshBuilder()
+    _ground_mesh(b, ground, extent, 2.0, graph, path_refl=0.1, other=0.25)
+    x0, x1 = -ext_x / 2 + 5.0, ext_x / 2 - 5.0  # the tunnel, between its portals
+    corners = ground.height(np.array([x0, x1, x0, x1]), np.array([-wall_y, -wall_y, wall_y, wall_y]))
+    zlo, ztop = float(corners.min()) - 0.5, float(corners.max()) + ceiling + 0.5
+    # Cross passages: a 5 m gap in alternate walls every 100-160 m, into an 8 m deep chamber.
+    passages = {-1.0: [], 1.0: []}
+    x, side = x0 + rng.uniform(30.0, 80.0), 1.0
+    while x < x1 - 20.0:
+        passages[side].append(x)
+        x, side = x + rng.uniform(100.0, 160.0), -side
+    for side, gaps in passages.items():
+        start = x0
+        for xp in gaps:
+            b.add(meshes.box(start, side * wall_y, xp - 2.5, side * (wall_y + 0.5), zlo, ztop), 0.4)
+            far = side * (wall_y + 8.0)
+            b.add(meshes.box(xp - 3.0, far, xp + 3.0, far + side * 0.5, zlo, ztop), 0.4)
+            for xs in (xp - 3.0, xp + 2.5):
+                b.add(meshes.box(xs, side * wall_y, xs + 0.5, far, zlo, ztop), 0.4)
+            start = xp + 2.5
+        b.add(meshes.box(start, side * wall_y, x1, side * (wall_y + 0.5), zlo, ztop), 0.4)
+    # The ceiling is the (planar) road surface raised by `ceiling`, over the chambers too: no steps along x.
+    xs, ys = np.array([x0, x1]), np.array([-wall_y - 8.5, wall_y + 8.5])
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    b.add(meshes.heightfield(xs, ys, ground.height(gx, gy) + ceiling), 0.3)
+    x, side = x0 + rng.uniform(20.0, 60.0), 1.0
+    while x < x1 - 10.0:  # emergency cabinets, 2 m long, standing 0.5 m out of alternate walls
+        y = side * (wall_y - 0.25)
+        z = float(ground.height(np.array(x), np.array(y)))
+        b.add(meshes.box(x - 1.0, y - 0.25, x + 1.0, y + 0.25, z - 0.1, z + 2.5), 0.7)
+        x, side = x + rng.uniform(40.0, 70.0), -side
+    x = x0 + rng.uniform(50.0, 100.0)
+    while x < x1 - 10.0:  # jet fans: a pair of 1 m x 4 m cylinders under the ceiling
+        z = float(ground.height(np.array(x), np.array(0.0))) + ceiling
+        for y in (-2.5, 2.5):
+            v, f = meshes.prism(0.0, 0.0, 0.5, -2.0, 2.0, sides=8)
+            v = v[:, [2, 0, 1]] + np.array([x, y, z - 0.8])  # the prism's axis turned along x
+            b.add((v, f), 0.5)
+        x += rng.uniform(90.0, 130.0)
+    return World("corridor", b.build(), ground, graph, extent)
+
+
+WORLDS: dict[str, Callable[[int, float], World]] = {"courtyard": courtyard, "urban": urban, "corridor": corridor}
 
 
 def check_world(name: str) -> str:

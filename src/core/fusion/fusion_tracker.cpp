@@ -1,0 +1,76 @@
+#include "grid_puzzle_localization/fusion/fusion_tracker.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace grid_puzzle_localization {
+
+const char* toString(FusionMode mode) { return mode == FusionMode::kSlidingWindow ? "sliding_window" : "none"; }
+
+std::optional<FusionMode> parseFusionMode(const std::string& name) {
+  if (name == "none") return FusionMode::kNone;
+  if (name == "sliding_window") return FusionMode::kSlidingWindow;
+  return std::nullopt;
+}
+
+std::string FusionConfig::validate() const {
+  std::string err;
+  if (!(ndt_covariance_scale > 0.0) || !std::isfinite(ndt_covariance_scale))
+    err += "fusion/ndt_covariance_scale must be > 0 (got " + std::to_string(ndt_covariance_scale) + "); ";
+  if (mode == FusionMode::kSlidingWindow) return err + window.validate();
+  return err + (window.base_T_imu.matrix().allFinite() ? "" : "fusion/window/base_T_imu must be finite; ");
+}
+
+FusionTracker::FusionTracker(const FusionConfig& config)
+    : base_T_imu_(config.window.base_T_imu),
+      ndt_covariance_scale_(config.ndt_covariance_scale),
+      window_(config.mode == FusionMode::kSlidingWindow ? std::make_unique<SlidingWindow>(config.window) : nullptr) {}
+
+FusionTracker::~FusionTracker() = default;
+
+void FusionTracker::setBaseTImu(const Eigen::Isometry3d& base_T_imu) {
+  if (!base_T_imu.matrix().allFinite()) throw std::invalid_argument("the IMU extrinsic base_T_imu must be finite");
+  base_T_imu_ = base_T_imu;
+  if (window_) window_->setBaseTImu(base_T_imu);
+}
+
+void FusionTracker::addImu(const ImuSample& sample) {
+  if (window_) window_->addImu(sample);
+}
+
+void FusionTracker::addOdometry(double stamp, const Eigen::Isometry3d& odom_T_base) {
+  if (window_) window_->addOdometry(stamp, odom_T_base);
+}
+
+std::optional<FusedState> FusionTracker::predict(double stamp) const {
+  return window_ ? window_->predict(stamp) : std::nullopt;
+}
+
+std::optional<Eigen::Isometry3d> FusionTracker::update(double stamp, bool restart, const Eigen::Isometry3d* match,
+                                                       const Matrix6d& ndt_covariance) {
+  if (!window_) return std::nullopt;
+  if (restart) window_->reset();
+  const Matrix6d information = match ? ndtInformation(*match, ndt_covariance) : Matrix6d::Zero();
+  const std::optional<FusedState> fused = window_->addScan(stamp, match, information);
+  if (!match || !fused || fused->stamp != stamp) return std::nullopt;
+  return fused->pose;
+}
+
+Matrix6d FusionTracker::ndtCovariance(const Matrix6d& hessian, CovarianceConfig config) const {
+  config.scale *= ndt_covariance_scale_;
+  return covarianceFromHessian(hessian, config);
+}
+
+void FusionTracker::mapSwitched() {
+  if (window_) window_->shrink();
+}
+
+void FusionTracker::reset() {
+  if (window_) window_->reset();
+}
+
+std::vector<std::string> FusionTracker::takeWarnings() {
+  return window_ ? window_->takeWarnings() : std::vector<std::string>();
+}
+
+}  // namespace grid_puzzle_localization
