@@ -52,6 +52,7 @@ struct HypothesesConfig {
   double yaw_step = 0.05;
   int yaw_count = 12;            ///< >= 0
   int refine = 4;                ///< >= 1, alignments run
+  int screen_points = 300;       ///< >= 10, scan points that screen the offsets by the NDT cost
   double poor_nvtl_ratio = 0.9;  ///< [0, 1]; 0 = only a match failing the gate is poor
 
   std::string validate() const;
@@ -88,7 +89,6 @@ struct LocalizerConfig {
   ImuConfig imu;
   PredictionConfig prediction;
   HypothesesConfig hypotheses;
-  SearchConfig search;
   LostConfig lost;
   FusionConfig fusion;
   /// The branch-and-bound search of recovery and globalLocalize. Its NDT refinement uses `ndt` above (the
@@ -134,8 +134,6 @@ struct LocalizerOutput {
   bool publish = false;
   double since_last_match = 0.0;     ///< [s] from the last accepted match (or initial pose) before this scan
   int hypotheses = 0;                ///< extra alignments from the hypotheses on this scan
-  int search_candidates = 0;         ///< poses screened by the search on this scan (0: no search)
-  bool search_ambiguous = false;     ///< the search found an acceptable pose but refused it as ambiguous
   bool recovered = false;            ///< accepted after lost.max_coast_time without a match
   bool global_search = false;        ///< the branch-and-bound search ran on this scan
   std::string global_search_reason;  ///< why its answer was refused (empty when taken or not run)

@@ -97,6 +97,7 @@ std::string HypothesesConfig::validate() const {
   if (!(yaw_step > 0.0)) err << "hypotheses/yaw_step must be > 0 rad (got " << yaw_step << "); ";
   if (!(yaw_count >= 0)) err << "hypotheses/yaw_count must be >= 0 (got " << yaw_count << "); ";
   if (!(refine >= 1)) err << "hypotheses/refine must be >= 1 (got " << refine << "); ";
+  if (!(screen_points >= 10)) err << "hypotheses/screen_points must be >= 10 (got " << screen_points << "); ";
   if (!(poor_nvtl_ratio >= 0.0 && poor_nvtl_ratio <= 1.0))
     err << "hypotheses/poor_nvtl_ratio must be in [0, 1] (got " << poor_nvtl_ratio << "); ";
   return err.str();
@@ -112,7 +113,7 @@ std::string LostConfig::validate() const {
 std::string LocalizerConfig::validate() const {
   std::ostringstream err;
   err << preprocess.validate() << ndt.validate() << covariance.validate() << match.validate() << imu.validate()
-      << prediction.validate() << hypotheses.validate() << search.validate() << lost.validate();
+      << prediction.validate() << hypotheses.validate() << lost.validate();
   err << fusion.validate();
   const std::string global_problem = globalConfig(*this).validate();
   if (!global_problem.empty()) err << "global_localization: " << global_problem << "; ";
@@ -204,7 +205,7 @@ GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
   GlobalSearchRequest request;
   request.center_x = region.centre.translation().x();
   request.center_y = region.centre.translation().y();
-  request.size = std::max(2.0 * region.radius, 2.0 * config_.search.step);
+  request.size = std::max(2.0 * region.radius, 2.0 * config_.ndt.resolution);
   request.yaw_center = std::atan2(region.centre.linear()(1, 0), region.centre.linear()(0, 0));
   // A known rotation is still searched over a few steps either side: the search's answer is refined by NDT.
   request.yaw_range =
@@ -240,7 +241,7 @@ std::optional<NdtResult> Localizer::tryHypotheses(const Eigen::Isometry3d& guess
   around.yaw_range = rotation_known ? 0.0 : config_.hypotheses.yaw_step * config_.hypotheses.yaw_count;
   SearchConfig screen;
   screen.yaw_step = config_.hypotheses.yaw_step;
-  screen.screen_points = config_.search.screen_points;
+  screen.screen_points = config_.hypotheses.screen_points;
   screen.refine = config_.hypotheses.refine;
   std::vector<Eigen::Isometry3d> guesses;
   for (const Eigen::Isometry3d* centre : {&held, &guess}) {
@@ -377,7 +378,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   // max_speed before any) is a false minimum, however well it scores: a pose cannot have got there.
   auto reachable = [&](const NdtResult& r) {
     return (toIsometry(r.transform).translation() - held.translation()).head<2>().norm() <=
-           region.radius + config_.search.step;
+           region.radius + config_.ndt.resolution;
   };
   std::optional<NdtResult> best;
   auto consider = [&](std::optional<NdtResult> r) {
@@ -398,7 +399,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
       // prediction's match either way; when none fits better, the prediction's match stands.
       std::optional<NdtResult> alternative = tryHypotheses(guess, held, rotation_known, out);
       const bool better_elsewhere =
-          alternative && alternative->nvtl > out.ndt.nvtl && distinct(*alternative, out.ndt, config_.search.step);
+          alternative && alternative->nvtl > out.ndt.nvtl && distinct(*alternative, out.ndt, config_.ndt.resolution);
       if (!better_elsewhere) consider(out.ndt);
       if (alternative && (!better_elsewhere || !poor(*alternative))) consider(std::move(alternative));
     }

@@ -3,17 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
-#include <sstream>
 
 namespace grid_puzzle_localization {
 namespace {
-
-Eigen::Isometry3d toIsometry(const Eigen::Matrix4f& m) {
-  Eigen::Isometry3d out = Eigen::Isometry3d::Identity();
-  out.translation() = m.topRightCorner<3, 1>().cast<double>();
-  out.linear() = Eigen::Quaterniond(m.topLeftCorner<3, 3>().cast<double>()).normalized().toRotationMatrix();
-  return out;
-}
 
 std::vector<double> yawOffsets(double yaw_range, double yaw_step) {
   std::vector<double> out{0.0};
@@ -45,18 +37,6 @@ std::vector<Eigen::Vector2d> positionOffsets(double radius, double step) {
 }
 
 }  // namespace
-
-std::string SearchConfig::validate() const {
-  std::ostringstream err;
-  if (!(step > 0.0)) err << "search/step must be > 0 m (got " << step << "); ";
-  if (!(yaw_step > 0.0)) err << "search/yaw_step must be > 0 rad (got " << yaw_step << "); ";
-  if (!(max_candidates >= 1)) err << "search/max_candidates must be >= 1 (got " << max_candidates << "); ";
-  if (!(screen_points >= 10)) err << "search/screen_points must be >= 10 (got " << screen_points << "); ";
-  if (!(refine >= 1)) err << "search/refine must be >= 1 (got " << refine << "); ";
-  if (!(ambiguity_ratio >= 0.0 && ambiguity_ratio <= 1.0))
-    err << "search/ambiguity_ratio must be in [0, 1] (got " << ambiguity_ratio << "); ";
-  return err.str();
-}
 
 std::vector<Eigen::Isometry3d> searchCandidates(const SearchRegion& region, const SearchConfig& config) {
   const std::vector<double> yaws = yawOffsets(std::max(0.0, region.yaw_range), config.yaw_step);
@@ -96,26 +76,6 @@ std::vector<Eigen::Isometry3d> screenCandidates(const NdtAligner& aligner, const
                     [&](std::size_t a, std::size_t b) { return cost[a] < cost[b]; });
   std::vector<Eigen::Isometry3d> out;
   for (std::size_t k = 0; k < want; ++k) out.push_back(all[order[k]]);
-  return out;
-}
-
-SearchResult pickUnambiguous(std::vector<NdtResult> refined, const std::vector<bool>& acceptable,
-                             const SearchConfig& config) {
-  SearchResult out;
-  int best = -1;
-  for (std::size_t i = 0; i < refined.size(); ++i)
-    if (acceptable[i] && (best < 0 || refined[i].nvtl > refined[best].nvtl)) best = static_cast<int>(i);
-  if (best < 0) return out;
-  const Eigen::Isometry3d winner = toIsometry(refined[best].transform);
-  out.best_nvtl = refined[best].nvtl;
-  for (std::size_t i = 0; i < refined.size(); ++i) {
-    const Eigen::Isometry3d other = toIsometry(refined[i].transform);
-    const bool distinct = (other.translation() - winner.translation()).norm() > 2.0 * config.step ||
-                          Eigen::AngleAxisd(other.rotation().transpose() * winner.rotation()).angle() > config.yaw_step;
-    if (distinct) out.runner_up_nvtl = std::max(out.runner_up_nvtl, refined[i].nvtl);
-  }
-  out.ambiguous = out.runner_up_nvtl >= config.ambiguity_ratio * out.best_nvtl;
-  if (!out.ambiguous) out.best = std::move(refined[best]);
   return out;
 }
 

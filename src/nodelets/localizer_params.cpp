@@ -108,13 +108,8 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
   load("hypotheses/yaw_step", c.hypotheses.yaw_step);
   load("hypotheses/yaw_count", c.hypotheses.yaw_count);
   load("hypotheses/refine", c.hypotheses.refine);
+  load("hypotheses/screen_points", c.hypotheses.screen_points);
   load("hypotheses/poor_nvtl_ratio", c.hypotheses.poor_nvtl_ratio);
-  load("search/step", c.search.step);
-  load("search/yaw_step", c.search.yaw_step);
-  load("search/max_candidates", c.search.max_candidates);
-  load("search/screen_points", c.search.screen_points);
-  load("search/refine", c.search.refine);
-  load("search/ambiguity_ratio", c.search.ambiguity_ratio);
   load("lost/max_coast_time", c.lost.max_coast_time);
   load("lost/search_period", c.lost.search_period);
   pnh.param("preprocess/time_field", p.time_field, p.time_field);

@@ -230,8 +230,8 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       NODELET_WARN_THROTTLE(2.0, "lost: global search around the last pose found nothing: %s",
                             out.global_search_reason.c_str());
     if (out.lost)
-      NODELET_WARN_THROTTLE(2.0, "lost: no acceptable match for %.1f s (NVTL %.2f%s); %s", out.since_last_match,
-                            out.ndt.nvtl, out.search_ambiguous ? ", search ambiguous" : "",
+      NODELET_WARN_THROTTLE(2.0, "lost: no acceptable match for %.1f s (NVTL %.2f); %s", out.since_last_match,
+                            out.ndt.nvtl,
                             out.publish ? "publishing the bounded prediction"
                                         : "not publishing odometry or TF (lost/max_coast_time exceeded)");
     publish(out, msg->header);

@@ -22,9 +22,9 @@ NdtStatus toStatusMsg(const LocalizerOutput& out, const std_msgs::Header& header
   msg.lost = out.lost;
   msg.published = out.publish;
   msg.since_last_match = out.since_last_match;
+  msg.global_search = out.global_search;
+  msg.global_search_reason = out.global_search_reason;
   msg.hypotheses = static_cast<std::uint32_t>(out.hypotheses);
-  msg.search_candidates = static_cast<std::uint32_t>(out.search_candidates);
-  msg.search_ambiguous = out.search_ambiguous;
   return msg;
 }
 

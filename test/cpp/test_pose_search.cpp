@@ -11,15 +11,6 @@ namespace {
 
 double yawOf(const Eigen::Isometry3d& t) { return std::atan2(t.linear()(1, 0), t.linear()(0, 0)); }
 
-gpl::NdtResult resultAt(double x, double y, double nvtl) {
-  gpl::NdtResult r;
-  r.transform(0, 3) = static_cast<float>(x);
-  r.transform(1, 3) = static_cast<float>(y);
-  r.nvtl = nvtl;
-  r.status = gpl::NdtResultStatus::OK;
-  return r;
-}
-
 }  // namespace
 
 // Before any motion is measured, the radius grows with max_speed; after, with margin times the fastest seen.
@@ -86,28 +77,4 @@ TEST(SearchCandidates, GridInsideTheDiscNearestFirstWithSymmetricYaws) {
   const auto coarse = gpl::searchCandidates(region, c);
   EXPECT_LE(coarse.size(), 190u);
   EXPECT_GT(coarse.size(), 100u);
-}
-
-TEST(PickUnambiguous, KeepsTheBestAcceptableAndRefusesADistinctPoseThatScoresAsWell) {
-  gpl::SearchConfig c;
-  c.step = 1.0;
-  c.ambiguity_ratio = 0.9;
-  // The best (2.0) is not acceptable; among the rest 1.5 wins; 1.2 is 5 m away (distinct) but below 0.9 * 1.5.
-  std::vector<gpl::NdtResult> refined{resultAt(0, 0, 2.0), resultAt(1, 1, 1.5), resultAt(1.1, 1, 1.49),
-                                      resultAt(6, 1, 1.2)};
-  gpl::SearchResult r = gpl::pickUnambiguous(refined, {false, true, true, true}, c);
-  ASSERT_TRUE(r.best);
-  EXPECT_DOUBLE_EQ(r.best->nvtl, 1.5);
-  EXPECT_DOUBLE_EQ(r.runner_up_nvtl, 1.2);  // 1.49 is the same pose (0.1 m away), not a runner-up
-  EXPECT_FALSE(r.ambiguous);
-  // A distinct pose at 1.4 >= 0.9 * 1.5: refused.
-  refined.push_back(resultAt(-4, 0, 1.4));
-  r = gpl::pickUnambiguous(refined, {false, true, true, true, true}, c);
-  EXPECT_FALSE(r.best);
-  EXPECT_TRUE(r.ambiguous);
-  EXPECT_DOUBLE_EQ(r.best_nvtl, 1.5);
-  // Nothing acceptable: no answer, not ambiguous.
-  r = gpl::pickUnambiguous(refined, {false, false, false, false, false}, c);
-  EXPECT_FALSE(r.best);
-  EXPECT_FALSE(r.ambiguous);
 }
