@@ -14,6 +14,7 @@
 
 #include <map>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <pluginlib/class_list_macros.hpp>
 
@@ -44,6 +45,9 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       throw;
     }
     if (params_.initial_pose) localizer_->setDefaultInitialPose(*params_.initial_pose);
+    // Consumed: a respawned process must not start again from the launch's pose (the vehicle has moved on);
+    // it waits for initialpose or searches around initialpose_hint (global_localization/*).
+    if (params_.initial_pose) pnh.deleteParam("initial_pose");
     localizer_->map().setTileCacheMb(params_.tile_cache_mb);
 
     tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
@@ -61,7 +65,10 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     } else {
       localizer_->map().submit(MapChange::pcdFile(params_.pcd_path));
     }
-    points_sub_ = nh.subscribe("points", 2, &NdtLocalizerNodelet::onPoints, this);
+    // Scans arrive on the multi-threaded queue and wait in a slot of one; a newer scan replaces one not yet
+    // taken (counted in status.scans_dropped), so a slow localizer skips scans instead of falling behind.
+    // roscpp's queue before the slot drops uncounted only when even that trivial callback stalls for 5 scans.
+    points_sub_ = mt_nh.subscribe("points", 5, &NdtLocalizerNodelet::onPointsArrived, this);
     initial_pose_sub_ = nh.subscribe("initialpose", 1, &NdtLocalizerNodelet::onInitialPose, this);
     imu_sub_ = nh.subscribe("imu", 200, &NdtLocalizerNodelet::onImu, this);
     hint_sub_ = nh.subscribe("initialpose_hint", 1, &NdtLocalizerNodelet::onHint, this);
@@ -154,6 +161,29 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     tf2::fromMsg(msg->angular_velocity, w);
     localizer_->addGyro(msg->header.stamp.toSec(), base_T_imu->linear() * w);
   }
+
+  void onPointsArrived(const sensor_msgs::PointCloud2::ConstPtr& msg) {
+    {
+      std::lock_guard<std::mutex> lock(pending_mutex_);
+      if (pending_scan_) ++scans_dropped_;
+      pending_scan_ = msg;
+    }
+    getNodeHandle().getCallbackQueue()->addCallback(boost::make_shared<TakeScan>(this));
+  }
+
+  struct TakeScan : ros::CallbackInterface {
+    explicit TakeScan(NdtLocalizerNodelet* n) : nodelet(n) {}
+    CallResult call() override {
+      sensor_msgs::PointCloud2::ConstPtr msg;
+      {
+        std::lock_guard<std::mutex> lock(nodelet->pending_mutex_);
+        msg.swap(nodelet->pending_scan_);
+      }
+      if (msg) nodelet->onPoints(msg);  // else a newer scan's callback already took it
+      return Success;
+    }
+    NdtLocalizerNodelet* nodelet;
+  };
 
   void onPoints(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     for (const std::string& err : localizer_->map().takeErrors()) NODELET_ERROR("map update failed: %s", err.c_str());
@@ -283,7 +313,17 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   void publish(const LocalizerOutput& out, const std_msgs::Header& scan_header) {
     std_msgs::Header status_header = scan_header;
     status_header.frame_id = params_.map_frame;
-    status_pub_.publish(toStatusMsg(out, status_header, localizer_->map().stats().update_ms, params_.map_source));
+    NdtStatus status = toStatusMsg(out, status_header, localizer_->map().stats().update_ms, params_.map_source);
+    {
+      std::lock_guard<std::mutex> lock(pending_mutex_);
+      status.scans_dropped = scans_dropped_;
+    }
+    if (status.scans_dropped > warned_drops_) {
+      NODELET_WARN_THROTTLE(5.0, "%lu scans dropped so far: scans arrive faster than they are matched",
+                            static_cast<unsigned long>(status.scans_dropped));
+      warned_drops_ = status.scans_dropped;
+    }
+    status_pub_.publish(status);
     if (!out.publish) return;  // lost for longer than lost/max_coast_time: no pose rather than a wrong one
     nav_msgs::Odometry odom;
     odom.header.stamp = scan_header.stamp;
@@ -343,6 +383,12 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   bool odom_published_by_others_ = false;
   ros::Time waiting_since_;              // first scan without an initial pose (automatic start)
   std::optional<Eigen::Vector2d> hint_;  // last initialpose_hint (map frame)
+
+  std::mutex pending_mutex_;                         // guards the two below (points arrive on the MT queue)
+  sensor_msgs::PointCloud2::ConstPtr pending_scan_;  // the newest scan not yet taken by the scan thread
+  std::uint64_t scans_dropped_ = 0;                  // scans replaced in the slot before they were taken
+  std::uint64_t warned_drops_ = 0;                   // scan thread only
+
   ros::Publisher odom_pub_, status_pub_, aligned_pub_;
   ros::Subscriber points_sub_, initial_pose_sub_, imu_sub_, map_sub_, hint_sub_;
   ros::ServiceServer global_srv_;
