@@ -7,6 +7,7 @@
 #include <sensor_msgs/Imu.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <std_srvs/Trigger.h>
+#include <sys/stat.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_broadcaster.h>
@@ -28,6 +29,15 @@
 #include "point_cloud_msg.hpp"
 
 namespace grid_puzzle_localization {
+
+namespace {
+
+bool isDirectory(const std::string& path) {
+  struct stat st {};
+  return ::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode);
+}
+
+}  // namespace
 
 class NdtLocalizerNodelet : public nodelet::Nodelet {
  private:
@@ -118,6 +128,16 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
           "tile side %g m is not a whole multiple of ~ndt/resolution %g m: voxels straddle tiles, so each tile's "
           "statistics are kept as well (more memory per voxel); use a resolution that divides the tile side",
           msg->grid_size, params_.core.ndt.resolution);
+    if (by_reference && !isDirectory(msg->tile_dir)) {
+      // Checked here, not only by the map worker, so the deltas missed meanwhile are made up by a resend.
+      tile_sequence_.notApplied();
+      NODELET_ERROR_THROTTLE(
+          5.0,
+          "tile_delta revision %u: tile directory '%s' does not exist (removed or unmounted?); "
+          "matching on the %zu tiles loaded, the whole window is asked for again with the next delta",
+          msg->revision, msg->tile_dir.c_str(), localizer_->map().stats().tiles);
+      return;
+    }
     if (by_reference) {  // the map worker reads the files
       localizer_->map().submit(MapChange::tileFiles(
           msg->grid_size,

@@ -3,14 +3,20 @@
 
 The package's launch files (ndt_localizer.launch, grid_puzzle_map_provider.launch) start the localizer nodelet
 in tiles mode, its manager, last_pose_hint and the map provider under roslaunch, all with respawn="true". One
-synthetic drive is played with `rosbag play --clock`; during it:
-1. the map provider is killed with SIGKILL: respawned, it sends the localizer a reset delta of the window; the
-   trajectory must go on within 5 cm of the ground truth, no scan lost. The ground truth stands in for the
-   uninterrupted run: ndt_localizer.test holds the uninterrupted tiles run to 5 cm of it, and this test checks the
-   poses before the kill against the same 5 cm.
-2. the localizer's nodelet manager is killed with SIGKILL: both respawn; the new nodelet has no pose and must
-   publish nothing until its global search around the last published position (initialpose_hint) finds the
-   vehicle; from then on within 5 cm. The recovery time is from the kill to the first pose published again."""
+synthetic drive is played with `rosbag play --clock`; during it, in bag time:
+- TILE_FAULTS: three tiles ahead of the vehicle are damaged (one deleted, one truncated, one replaced by a
+  directory: the test runs as root, so a file made unreadable with chmod would still be read), then the tile
+  directory is moved away and back. The localizer must name each bad file and the missing directory in its
+  errors, once per delta that names them, keep matching on the tiles it has, ask for the whole window when the
+  directory is back, and read the repaired files at the next reset (the provider's respawn below). The tiles it
+  holds are checked through status.target_points against the window that the deltas describe.
+- PROVIDER_KILL: the map provider is killed with SIGKILL: respawned, it sends the localizer a reset delta of the
+  window; the trajectory must go on within 5 cm of the ground truth, every scan matched. The ground truth stands
+  in for the uninterrupted run: ndt_localizer.test holds the uninterrupted tiles run to 5 cm of it, and this test
+  checks the poses before the kill against the same 5 cm.
+- LOCALIZER_KILL: the localizer's nodelet manager is killed with SIGKILL: both respawn; the new nodelet has no
+  pose and must publish nothing until its global search around the last published position (initialpose_hint)
+  finds the vehicle; from then on within 5 cm. The recovery time is from the kill to the first pose published."""
 
 from __future__ import annotations
 
@@ -32,6 +38,7 @@ from fixtures.synthetic_tiles import write_map_tiles
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from grid_puzzle_localization.msg import NdtStatus, TileDelta
 from nav_msgs.msg import Odometry
+from rosgraph_msgs.msg import Log
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Header
 
@@ -39,11 +46,15 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 from fault_report import record
 from ros_process import node_pid
 
+from grid_puzzle_localization.tiles.grid import parse_tile_stem, tile_filename
+
 NAME = "/localizer_faults_test"
 START = 1000.0  # bag time of the first scan [s]
-DURATION = 14.0  # [s] of drive
-PROVIDER_KILL = 3.0  # [s from the start, bag time]
-LOCALIZER_KILL = 7.0
+DURATION = 16.0  # [s] of drive
+DAMAGE, DIR_GONE, DIR_BACK, REPAIR = 1.0, 1.2, 2.4, 6.0  # [s from the start, bag time] the tile faults
+PROVIDER_KILL = 6.5
+LOCALIZER_KILL = 10.0
+DAMAGED = {(11, -1): "deleted", (11, 0): "truncated", (11, 1): "a directory"}  # enter the window at about 5.6 s
 RATE = 0.25  # playback rate: the localizer, the provider and the player share 2 busy cores
 TILE = 10.0  # [m]
 WAIT = 60.0  # [s] upper bound on waiting for a process or a connection (never asserted as a time)
@@ -68,15 +79,21 @@ LAUNCH = """<launch>
 
 
 class Recorder:
-    """Odometry, statuses and tile deltas with their arrival time (monotonic)."""
+    """Odometry, statuses, tile deltas and the localizer's errors, with their arrival time (monotonic). The window
+    is mirrored from the deltas (a reset starts over) to know which tiles the localizer should hold."""
 
     def __init__(self) -> None:
         self.odom: list[tuple[float, float, np.ndarray]] = []  # (arrival, stamp from the start, xyz)
         self.status: list[tuple[float, float, NdtStatus]] = []
+        self.window: set[tuple[int, int]] = set()
+        self.windows: list[tuple[float, frozenset]] = []  # (arrival, window after the delta)
         self.resets: list[float] = []  # arrival of reset deltas
+        self.added: list[tuple[float, set]] = []  # (arrival, tiles the delta adds)
+        self.errors: list[tuple[float, str]] = []
         rospy.Subscriber("/odom", Odometry, self._on_odom, queue_size=100)
         rospy.Subscriber("/ndt_localizer/status", NdtStatus, self._on_status, queue_size=100)
         rospy.Subscriber("/tile_delta", TileDelta, self._on_delta, queue_size=100)
+        rospy.Subscriber("/rosout_agg", Log, self._on_log, queue_size=1000)
 
     def _on_odom(self, msg: Odometry) -> None:
         p = msg.pose.pose.position
@@ -86,8 +103,22 @@ class Recorder:
         self.status.append((time.monotonic(), msg.header.stamp.to_sec() - START, msg))
 
     def _on_delta(self, msg: TileDelta) -> None:
+        now = time.monotonic()
         if msg.reset:
-            self.resets.append(time.monotonic())
+            self.resets.append(now)
+            self.window.clear()
+        self.window -= {parse_tile_stem(t, TILE) for t in msg.removed_ids}
+        self.window |= {parse_tile_stem(t, TILE) for t in msg.added_ids}
+        self.added.append((now, {parse_tile_stem(t, TILE) for t in msg.added_ids}))
+        self.windows.append((now, frozenset(self.window)))
+
+    def _on_log(self, msg: Log) -> None:
+        if msg.level >= Log.ERROR:
+            self.errors.append((time.monotonic(), msg.msg))
+
+    def window_at(self, t: float) -> frozenset:
+        before = [w for arrival, w in self.windows if arrival <= t]
+        return before[-1] if before else frozenset()
 
 
 class LocalizerFaultsTest(unittest.TestCase):
@@ -99,7 +130,7 @@ class LocalizerFaultsTest(unittest.TestCase):
         scene = ss.make_scene()
         cls.drive = ss.Drive(duration=DURATION, x0=-8.0)
         write_drive_bag(tmp / "drive.bag", scene, cls.drive, start=START)
-        write_map_tiles(ss.sample_map(scene), tmp / "tiles", TILE)
+        cls.tiles = write_map_tiles(ss.sample_map(scene), tmp / "tiles", TILE)
         (tmp / "stack.launch").write_text(LAUNCH.format(tiles=tmp / "tiles", tile=TILE))
         cls.rec = Recorder()
         cls.log = open(tmp / "roslaunch.log", "w")  # noqa: SIM115 (closed in tearDownClass)
@@ -130,21 +161,54 @@ class LocalizerFaultsTest(unittest.TestCase):
             "provider": node_pid("/grid_puzzle_map_provider", NAME, WAIT),
             "manager": node_pid("/localizer_manager", NAME, WAIT),
         }
-        cls.kills: dict[str, float] = {}  # monotonic time of each kill
+        cls.kills: dict[str, float] = {}  # monotonic time of each fault
         play = subprocess.Popen(
             ["rosbag", "play", "--clock", "-q", "-d", "2", "-r", str(RATE), f"{cls.tmp.name}/drive.bag"]
         )
-        for name, at in (("provider", PROVIDER_KILL), ("manager", LOCALIZER_KILL)):
+        tiles = Path(cls.tmp.name) / "tiles"
+        events = (
+            ("damage", DAMAGE, cls.damage_tiles),
+            ("dir_gone", DIR_GONE, lambda: tiles.rename(tiles.with_name("tiles.away"))),
+            ("dir_back", DIR_BACK, lambda: tiles.with_name("tiles.away").rename(tiles)),
+            ("repair", REPAIR, cls.repair_tiles),
+            ("provider", PROVIDER_KILL, lambda: os.kill(cls.pids["provider"], signal.SIGKILL)),
+            ("manager", LOCALIZER_KILL, lambda: os.kill(cls.pids["manager"], signal.SIGKILL)),
+        )
+        for name, at, act in events:
             while play.poll() is None and (rospy.Time.now().to_sec() - START) < at:
                 time.sleep(0.01)
             cls.kills[name] = time.monotonic()
-            os.kill(cls.pids[name], signal.SIGKILL)
+            act()
         play.wait(timeout=DURATION / RATE + WAIT)
         time.sleep(2.0)
         cls.respawned = {
             name: node_pid(f"/{node}", NAME, WAIT, other_than=cls.pids[name])
             for name, node in (("provider", "grid_puzzle_map_provider"), ("manager", "localizer_manager"))
         }
+
+    @classmethod
+    def tile_path(cls, key: tuple[int, int]) -> Path:
+        return Path(cls.tmp.name) / "tiles" / tile_filename(*key, TILE)
+
+    @classmethod
+    def damage_tiles(cls) -> None:
+        for key, how in DAMAGED.items():
+            path = cls.tile_path(key)
+            data = path.read_bytes()
+            path.unlink()
+            if how == "truncated":
+                path.write_bytes(data[: len(data) // 2])
+            elif how == "a directory":
+                path.mkdir()
+
+    @classmethod
+    def repair_tiles(cls) -> None:
+        for key in DAMAGED:
+            path = cls.tile_path(key)
+            if path.is_dir():
+                path.rmdir()
+            # Rewritten from the points the test keeps (the same writer as the original).
+            write_map_tiles(cls.tiles[key], path.parent, TILE)
 
     @classmethod
     def stop_launch(cls) -> None:
@@ -162,6 +226,55 @@ class LocalizerFaultsTest(unittest.TestCase):
 
     def error(self, t: float, xyz: np.ndarray) -> float:
         return float(np.linalg.norm(xyz - self.drive.pose(t)[:3, 3]))
+
+    def held_points(self, arrival: float, missing: set) -> int:
+        """Points of the window the deltas described at ``arrival``, without the ``missing`` tiles."""
+        return sum(len(self.tiles[k]) for k in self.rec.window_at(arrival) - missing if k in self.tiles)
+
+    def first_consistent(self, since: float, missing: set) -> float | None:
+        """Arrival of the first status after ``since`` whose map holds exactly the window's tiles but ``missing``."""
+        for arrival, _, st in self.rec.status:
+            if arrival > since and st.target_points == self.held_points(arrival, missing):
+                return arrival
+        return None
+
+    def test_tile_faults_named_matching_goes_on_and_recovers(self) -> None:
+        f = self.kills
+        errors = [m for t, m in self.rec.errors if f["damage"] < t < f["manager"]]
+        tile_dir = str(Path(self.tmp.name) / "tiles")
+        gone = [m for m in errors if f"'{tile_dir}' does not exist" in m]
+        self.assertTrue(gone, f"no error names the missing tile directory; errors: {errors[:5]}")
+        for key, how in DAMAGED.items():
+            path = str(self.tile_path(key))
+            named = [m for m in errors if path in m]
+            # Once per delta that named the tile while it was bad, not once per scan.
+            deltas = sum(1 for t, keys in self.rec.added if f["damage"] < t < f["repair"] and key in keys)
+            self.assertGreaterEqual(len(named), 1, f"no error names the {how} tile {path}; errors: {errors[:5]}")
+            self.assertLessEqual(len(named), deltas, f"the {how} tile reported {len(named)} times in {deltas} deltas")
+        statuses = [st for t, _, st in self.rec.status if f["damage"] < t < f["provider"]]
+        self.assertTrue(statuses and all(st.match_accepted for st in statuses), "matching stopped during the faults")
+        # The directory back: the next delta asks for the window, whose reset is read whole.
+        dir_back = self.first_consistent(f["dir_back"], set())
+        self.assertIsNotNone(dir_back, "the map never matched the window after the directory came back")
+        # The bad tiles entered: all but them were loaded ...
+        damaged = set(DAMAGED)
+        entered = [t for t, keys in self.rec.added if t > f["dir_back"] and damaged & keys]
+        self.assertTrue(entered and entered[0] < f["repair"], "the damaged tiles did not enter the window in time")
+        self.assertIsNotNone(self.first_consistent(entered[0], damaged), "the good tiles of the delta were not kept")
+        # ... and read once repaired, at the next reset (the provider's respawn).
+        repaired = self.first_consistent(f["repair"], set())
+        self.assertIsNotNone(repaired, "the repaired tiles were never read")
+        record(
+            "tile directory moved away and back under the running localizer",
+            "error naming the directory; matching on the tiles held; whole window asked for with the next delta",
+            round(dir_back - f["dir_back"], 2),
+        )
+        record(
+            "tile deleted, truncated, replaced by a directory, under the running localizer",
+            "one error per delta naming each file, the rest of the window loaded; files read again at the next reset",
+            round(repaired - f["repair"], 2),
+            data_lost="none (the damaged tiles are missing from the map until they are back and a reset comes)",
+        )
 
     def test_provider_sigkill_trajectory_within_5cm(self) -> None:
         kill = self.kills["provider"]
