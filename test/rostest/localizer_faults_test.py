@@ -34,7 +34,6 @@ import rospy
 import rostest
 from fixtures import synthetic_scene as ss
 from fixtures.synthetic_bag import write_drive_bag
-from fixtures.synthetic_tiles import write_map_tiles
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from grid_puzzle_localization.msg import NdtStatus, TileDelta
 from nav_msgs.msg import Odometry
@@ -46,7 +45,10 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 from fault_report import record
 from ros_process import node_pid
 
-from grid_puzzle_localization.tiles.grid import parse_tile_stem, tile_filename
+from grid_puzzle_localization.pcd import write_pcd
+from grid_puzzle_localization.pcd.reader import xyz_records
+from grid_puzzle_localization.tiles.grid import parse_tile_stem
+from grid_puzzle_localization.tiling.index import load_tile_index
 
 NAME = "/localizer_faults_test"
 START = 1000.0  # bag time of the first scan [s]
@@ -130,7 +132,17 @@ class LocalizerFaultsTest(unittest.TestCase):
         scene = ss.make_scene()
         cls.drive = ss.Drive(duration=DURATION, x0=-8.0)
         write_drive_bag(tmp / "drive.bag", scene, cls.drive, start=START)
-        cls.tiles = write_map_tiles(ss.sample_map(scene), tmp / "tiles", TILE)
+        # Tiled by `gpm tile`, with its index: the provider then lists a tile whose file went missing (without an
+        # index it would rescan the directory on each change and simply drop the tile).
+        write_pcd(tmp / "map.pcd", xyz_records(ss.sample_map(scene)))
+        subprocess.run(
+            ["gpm", "tile", str(tmp / "map.pcd"), "-s", str(TILE), "-o", str(tmp / "tiles"), "--no-progress"],
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
+        index = load_tile_index(tmp / "tiles")
+        cls.points = {e.key: e.points for e in index.tiles}
+        cls.files = {e.key: e.file for e in index.tiles}
         (tmp / "stack.launch").write_text(LAUNCH.format(tiles=tmp / "tiles", tile=TILE))
         cls.rec = Recorder()
         cls.log = open(tmp / "roslaunch.log", "w")  # noqa: SIM115 (closed in tearDownClass)
@@ -188,27 +200,26 @@ class LocalizerFaultsTest(unittest.TestCase):
 
     @classmethod
     def tile_path(cls, key: tuple[int, int]) -> Path:
-        return Path(cls.tmp.name) / "tiles" / tile_filename(*key, TILE)
+        return Path(cls.tmp.name) / "tiles" / cls.files[key]
 
     @classmethod
     def damage_tiles(cls) -> None:
+        cls.originals = {key: cls.tile_path(key).read_bytes() for key in DAMAGED}
         for key, how in DAMAGED.items():
             path = cls.tile_path(key)
-            data = path.read_bytes()
             path.unlink()
             if how == "truncated":
-                path.write_bytes(data[: len(data) // 2])
+                path.write_bytes(cls.originals[key][: len(cls.originals[key]) // 2])
             elif how == "a directory":
                 path.mkdir()
 
     @classmethod
     def repair_tiles(cls) -> None:
-        for key in DAMAGED:
+        for key, data in cls.originals.items():
             path = cls.tile_path(key)
             if path.is_dir():
                 path.rmdir()
-            # Rewritten from the points the test keeps (the same writer as the original).
-            write_map_tiles(cls.tiles[key], path.parent, TILE)
+            path.write_bytes(data)
 
     @classmethod
     def stop_launch(cls) -> None:
@@ -229,7 +240,7 @@ class LocalizerFaultsTest(unittest.TestCase):
 
     def held_points(self, arrival: float, missing: set) -> int:
         """Points of the window the deltas described at ``arrival``, without the ``missing`` tiles."""
-        return sum(len(self.tiles[k]) for k in self.rec.window_at(arrival) - missing if k in self.tiles)
+        return sum(self.points.get(k, 0) for k in self.rec.window_at(arrival) - missing)
 
     def first_consistent(self, since: float, missing: set) -> float | None:
         """Arrival of the first status after ``since`` whose map holds exactly the window's tiles but ``missing``."""

@@ -34,7 +34,7 @@ START = 1000.0  # bag time of the first scan [s]
 DURATION = 12.0  # [s] of drive
 LOAD = (3.0, 7.0)  # [s from the start, bag time] busy processes running
 CATCH_UP = 1.0  # [s] after the load: the scans then must be matched promptly again
-MAX_LAG = 0.5  # [s] from a scan's stamp to its status, once caught up (5 scan periods)
+MAX_LAG = 1.0  # [s] from a scan's stamp to its status, once caught up (10 scan periods; the machine is shared)
 TOLERANCE = 0.05  # [m]
 WAIT = 60.0  # [s] upper bound on waiting for a connection (never asserted as a time)
 
