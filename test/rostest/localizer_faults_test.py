@@ -52,11 +52,12 @@ from grid_puzzle_localization.tiling.index import load_tile_index
 
 NAME = "/localizer_faults_test"
 START = 1000.0  # bag time of the first scan [s]
-DURATION = 16.0  # [s] of drive
-DAMAGE, DIR_GONE, DIR_BACK, REPAIR = 1.0, 1.2, 2.4, 6.0  # [s from the start, bag time] the tile faults
-PROVIDER_KILL = 6.5
-LOCALIZER_KILL = 10.0
-DAMAGED = {(11, -1): "deleted", (11, 0): "truncated", (11, 1): "a directory"}  # enter the window at about 5.6 s
+DURATION = 17.0  # [s] of drive
+DAMAGE, DIR_GONE, DIR_BACK, REPAIR = 1.0, 1.2, 2.4, 7.5  # [s from the start, bag time] the tile faults
+PROVIDER_KILL = 8.0
+LOCALIZER_KILL = 11.0
+# The provider moves the window every 5 m (half a tile): these tiles enter at about 6 s (x = 22 m).
+DAMAGED = {(11, -1): "deleted", (11, 0): "truncated", (11, 1): "a directory"}
 RATE = 0.25  # playback rate: the localizer, the provider and the player share 2 busy cores
 TILE = 10.0  # [m]
 WAIT = 60.0  # [s] upper bound on waiting for a process or a connection (never asserted as a time)
@@ -70,6 +71,8 @@ LAUNCH = """<launch>
   <param name="ndt_localizer/map_source" value="tiles"/>
   <param name="ndt_localizer/resend_service" value="grid_puzzle_map_provider/resend"/>
   <param name="ndt_localizer/publish_tf" value="false"/>
+  <!-- No read-ahead: a tile read ahead before it was damaged would be served, intact, from the cache. -->
+  <param name="ndt_localizer/tiles/cache_mb" value="0.0"/>
   <include file="$(find grid_puzzle_localization)/launch/grid_puzzle_map_provider.launch">
     <arg name="tile_dir" value="{tiles}"/>
   </include>
@@ -95,7 +98,7 @@ class Recorder:
         rospy.Subscriber("/odom", Odometry, self._on_odom, queue_size=100)
         rospy.Subscriber("/ndt_localizer/status", NdtStatus, self._on_status, queue_size=100)
         rospy.Subscriber("/tile_delta", TileDelta, self._on_delta, queue_size=100)
-        rospy.Subscriber("/rosout_agg", Log, self._on_log, queue_size=1000)
+        rospy.Subscriber("/rosout", Log, self._on_log, queue_size=1000)
 
     def _on_odom(self, msg: Odometry) -> None:
         p = msg.pose.pose.position
