@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """`make reliability`: fuzzes every reader of outside data (tools/fuzz.py), runs the fault tests
-(test/python/test_fault_*.py and test/rostest/provider_respawn.test, which record each fault's outcome)
+(test/python/test_fault_*.py and the rostests in ROSTESTS, which record each fault's outcome)
 and the replay of the inputs fuzzing found, then prints the report as a markdown table and writes it as
 JSON lines to build/reliability/report.jsonl. Exit status 1 when a fuzzer found something or a fault
 test failed."""
@@ -17,7 +17,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-ROSTESTS = ("provider_respawn.test",)
+ROSTESTS = ("provider_respawn.test", "localizer_faults.test", "localizer_starvation.test")
 FAULT_TESTS = (
     "test/python/test_fault_disk.py",
     "test/python/test_fuzz_regressions.py",

@@ -20,6 +20,10 @@ class TileDeltaSequence {
   /// The resend request failed (service down): the next out-of-order delta asks again.
   void resendFailed() { awaiting_reset_ = false; }
 
+  /// The delta last judged kApply could not be applied (its tile directory was missing): the map no longer
+  /// follows the revisions, so the next delta asks for the whole window.
+  void notApplied() { synced_ = awaiting_reset_ = false; }
+
   bool synchronised() const { return synced_; }
 
  private:

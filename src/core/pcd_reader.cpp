@@ -1,5 +1,6 @@
 #include "grid_puzzle_localization/pcd_reader.hpp"
 
+#include <cerrno>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
@@ -168,7 +169,12 @@ void failTruncated(const std::string& path, const Header& h, const std::string& 
 PointCloud readPcdXyz(const std::string& path) {
   std::ifstream file(path, std::ios::binary);
   if (!file) fail(path, "cannot open it; check the path and permissions");
-  const std::string bytes((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
+  std::string bytes;
+  try {
+    bytes.assign(std::istreambuf_iterator<char>(file), std::istreambuf_iterator<char>());
+  } catch (const std::ios_base::failure&) {  // libstdc++ throws on a read error: a directory opens, EISDIR
+    fail(path, std::string("cannot read it (") + std::strerror(errno) + "); it must be a readable PCD file");
+  }
   const Header h = parseHeader(path, bytes);
   const Field* xyz[3] = {&xyzField(path, h, "x"), &xyzField(path, h, "y"), &xyzField(path, h, "z")};
   const char* data = bytes.data() + h.data_offset;

@@ -9,8 +9,12 @@
 
 namespace grid_puzzle_localization {
 
-/// Key of the x-y cell (x, y) (cell indices, not metres).
-inline std::int64_t cellKey(std::int64_t x, std::int64_t y) { return (x << 32) ^ (y & 0xffffffffLL); }
+/// Key of the x-y cell (x, y) (cell indices, not metres). Shifted as unsigned: shifting a negative value left is
+/// undefined before C++20 (UBSan reports it).
+inline std::int64_t cellKey(std::int64_t x, std::int64_t y) {
+  return static_cast<std::int64_t>((static_cast<std::uint64_t>(x) << 32) ^
+                                   (static_cast<std::uint64_t>(y) & 0xffffffffULL));
+}
 
 /// The lowest z of the points in each x-y cell of edge `cell` [m].
 class GroundCells {

@@ -7,6 +7,7 @@
 #include <sensor_msgs/Imu.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <std_srvs/Trigger.h>
+#include <sys/stat.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/transform_broadcaster.h>
@@ -16,6 +17,7 @@
 #include <cctype>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <pluginlib/class_list_macros.hpp>
 
@@ -30,6 +32,15 @@
 #include "point_cloud_msg.hpp"
 
 namespace grid_puzzle_localization {
+
+namespace {
+
+bool isDirectory(const std::string& path) {
+  struct stat st {};
+  return ::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode);
+}
+
+}  // namespace
 
 class NdtLocalizerNodelet : public nodelet::Nodelet {
  private:
@@ -47,6 +58,9 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       throw;
     }
     if (params_.initial_pose) localizer_->setDefaultInitialPose(*params_.initial_pose);
+    // Consumed: a respawned process must not start again from the launch's pose (the vehicle has moved on);
+    // it waits for initialpose or searches around initialpose_hint (global_localization/*).
+    if (params_.initial_pose) pnh.deleteParam("initial_pose");
     localizer_->map().setTileCacheMb(params_.tile_cache_mb);
 
     tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
@@ -64,7 +78,10 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     } else {
       localizer_->map().submit(MapChange::pcdFile(params_.pcd_path));
     }
-    points_sub_ = nh.subscribe("points", 2, &NdtLocalizerNodelet::onPoints, this);
+    // Scans arrive on the multi-threaded queue and wait in a slot of one; a newer scan replaces one not yet
+    // taken (counted in status.scans_dropped), so a slow localizer skips scans instead of falling behind.
+    // roscpp's queue before the slot drops uncounted only when even that trivial callback stalls for 5 scans.
+    points_sub_ = mt_nh.subscribe("points", 5, &NdtLocalizerNodelet::onPointsArrived, this);
     initial_pose_sub_ = nh.subscribe("initialpose", 1, &NdtLocalizerNodelet::onInitialPose, this);
     imu_sub_ = nh.subscribe("imu", 200, &NdtLocalizerNodelet::onImu, this);
     if (localizer_->fusion().enabled())
@@ -117,6 +134,16 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
           "tile side %g m is not a whole multiple of ~ndt/resolution %g m: voxels straddle tiles, so each tile's "
           "statistics are kept as well (more memory per voxel); use a resolution that divides the tile side",
           msg->grid_size, params_.core.ndt.resolution);
+    if (by_reference && !isDirectory(msg->tile_dir)) {
+      // Checked here, not only by the map worker, so the deltas missed meanwhile are made up by a resend.
+      tile_sequence_.notApplied();
+      NODELET_ERROR_THROTTLE(
+          5.0,
+          "tile_delta revision %u: tile directory '%s' does not exist (removed or unmounted?); "
+          "matching on the %zu tiles loaded, the whole window is asked for again with the next delta",
+          msg->revision, msg->tile_dir.c_str(), localizer_->map().stats().tiles);
+      return;
+    }
     if (by_reference) {  // the map worker reads the files
       localizer_->map().submit(MapChange::tileFiles(
           msg->grid_size,
@@ -192,6 +219,29 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       NODELET_WARN("fusion: %s", warning.c_str());
     }
   }
+
+  void onPointsArrived(const sensor_msgs::PointCloud2::ConstPtr& msg) {
+    {
+      std::lock_guard<std::mutex> lock(pending_mutex_);
+      if (pending_scan_) ++scans_dropped_;
+      pending_scan_ = msg;
+    }
+    getNodeHandle().getCallbackQueue()->addCallback(boost::make_shared<TakeScan>(this));
+  }
+
+  struct TakeScan : ros::CallbackInterface {
+    explicit TakeScan(NdtLocalizerNodelet* n) : nodelet(n) {}
+    CallResult call() override {
+      sensor_msgs::PointCloud2::ConstPtr msg;
+      {
+        std::lock_guard<std::mutex> lock(nodelet->pending_mutex_);
+        msg.swap(nodelet->pending_scan_);
+      }
+      if (msg) nodelet->onPoints(msg);  // else a newer scan's callback already took it
+      return Success;
+    }
+    NdtLocalizerNodelet* nodelet;
+  };
 
   void onPoints(const sensor_msgs::PointCloud2::ConstPtr& msg) {
     for (const std::string& err : localizer_->map().takeErrors()) NODELET_ERROR("map update failed: %s", err.c_str());
@@ -327,7 +377,17 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   void publish(const LocalizerOutput& out, const std_msgs::Header& scan_header) {
     std_msgs::Header status_header = scan_header;
     status_header.frame_id = params_.map_frame;
-    status_pub_.publish(toStatusMsg(out, status_header, localizer_->map().stats().update_ms, params_.map_source));
+    NdtStatus status = toStatusMsg(out, status_header, localizer_->map().stats().update_ms, params_.map_source);
+    {
+      std::lock_guard<std::mutex> lock(pending_mutex_);
+      status.scans_dropped = scans_dropped_;
+    }
+    if (status.scans_dropped > warned_drops_) {
+      NODELET_WARN_THROTTLE(5.0, "%lu scans dropped so far: scans arrive faster than they are matched",
+                            static_cast<unsigned long>(status.scans_dropped));
+      warned_drops_ = status.scans_dropped;
+    }
+    status_pub_.publish(status);
     if (!out.publish) return;  // lost for longer than lost/max_coast_time: no pose rather than a wrong one
     nav_msgs::Odometry odom;
     odom.header.stamp = scan_header.stamp;
@@ -390,6 +450,12 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   std::map<std::string, ros::WallTime> fusion_warned_;  // scan thread: last log time of each kind of warning
   ros::Time waiting_since_;                             // first scan without an initial pose (automatic start)
   std::optional<Eigen::Vector2d> hint_;                 // last initialpose_hint (map frame)
+
+  std::mutex pending_mutex_;                         // guards the two below (points arrive on the MT queue)
+  sensor_msgs::PointCloud2::ConstPtr pending_scan_;  // the newest scan not yet taken by the scan thread
+  std::uint64_t scans_dropped_ = 0;                  // scans replaced in the slot before they were taken
+  std::uint64_t warned_drops_ = 0;                   // scan thread only
+
   ros::Publisher odom_pub_, status_pub_, aligned_pub_;
   ros::Subscriber points_sub_, initial_pose_sub_, imu_sub_, odom_in_sub_, map_sub_, hint_sub_;
   ros::ServiceServer global_srv_;

@@ -69,3 +69,10 @@ TEST(BadInput, CompressedSizeBeyondLzfExpansionRefused) {
   expectRefused(write("lzf_4gb.pcd", header("1", "binary_compressed") + sizes + std::string(13, '\0')),
                 "cannot decompress to");
 }
+
+TEST(BadInput, DirectoryInPlaceOfTheFileRefusedNamingIt) {
+  // As a tile replaced under the running localizer: opening succeeds, reading fails with EISDIR.
+  const std::string path = ::testing::TempDir() + "/gpl_bad_input_directory.pcd";
+  fs::create_directories(path);
+  expectRefused(path, "cannot read it (Is a directory)");
+}

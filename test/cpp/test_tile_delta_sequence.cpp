@@ -34,3 +34,15 @@ TEST(TileDeltaSequence, RevisionWrapAroundIsConsecutive) {
   EXPECT_EQ(seq.accept(0xffffffffu, true), V::kApply);
   EXPECT_EQ(seq.accept(0u, false), V::kApply);
 }
+
+TEST(TileDeltaSequence, DeltaNotAppliedRequestsTheWindowWithTheNextDelta) {
+  gpl::TileDeltaSequence seq;
+  EXPECT_EQ(seq.accept(1, true), V::kApply);
+  EXPECT_EQ(seq.accept(2, false), V::kApply);
+  seq.notApplied();  // e.g. the tile directory was gone
+  EXPECT_FALSE(seq.synchronised());
+  EXPECT_EQ(seq.accept(3, false), V::kRequestResend);
+  EXPECT_EQ(seq.accept(4, false), V::kIgnore);
+  EXPECT_EQ(seq.accept(5, true), V::kApply);
+  EXPECT_TRUE(seq.synchronised());
+}

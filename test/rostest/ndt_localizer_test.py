@@ -21,14 +21,13 @@ import rostest
 from fixtures import synthetic_scene as ss
 from fixtures.odometry_track import OdometryTrack, angle_between
 from fixtures.synthetic_bag import write_drive_bag, xyz_cloud
+from fixtures.synthetic_tiles import write_map_tiles
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from grid_puzzle_localization.msg import NdtStatus, TileDelta
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger, TriggerResponse
 
-from grid_puzzle_localization.pcd import write_pcd
-from grid_puzzle_localization.pcd.reader import XYZ_DTYPE
 from grid_puzzle_localization.tiles import grid
 
 START = 1000.0  # bag time of the first scan [s]
@@ -43,17 +42,8 @@ class TileDeltaPublisher:
     change)."""
 
     def __init__(self, points: np.ndarray, tile_dir: Path) -> None:
-        points = points.astype(np.float32)  # tiled as stored, so no float64 border point changes tile
-        ij = grid.tile_index(points[:, :2].astype(np.float64), TILE)
-        keys, inverse = np.unique(ij, axis=0, return_inverse=True)
-        self.tiles = {(int(i), int(j)): points[inverse.ravel() == k] for k, (i, j) in enumerate(keys)}
+        self.tiles = write_map_tiles(points, tile_dir, TILE)
         self.tile_dir = tile_dir
-        tile_dir.mkdir()
-        for (i, j), tile in self.tiles.items():
-            records = np.zeros(len(tile), dtype=XYZ_DTYPE)
-            for axis, name in enumerate("xyz"):
-                records[name] = tile[:, axis]
-            write_pcd(tile_dir / grid.tile_filename(i, j, TILE), records)
         self.loaded: set[tuple[int, int]] = set()
         self.revision = 0
         self.changes = 0

@@ -14,10 +14,7 @@ import tempfile
 import threading
 import time
 import unittest
-import xmlrpc.client
 
-import rosgraph
-import rosnode
 import rospy
 import rostest
 from fixtures.synthetic_tiles import write_tiles
@@ -28,6 +25,7 @@ from grid_puzzle_localization.tiles.grid import parse_tile_stem, tile_filename
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "python"))
 from fault_report import record
+from ros_process import node_pid
 from tile_truth import brute_force_window_files
 
 PKG = "grid_puzzle_localization"
@@ -89,23 +87,6 @@ class Mirror:
                 assert os.path.isfile(os.path.join(tile_dir, tile_filename(*key, S))), f"tile {key} has no file"
 
 
-def node_pid(name, other_than=None):
-    """The pid of node ``name`` as the master knows it; with ``other_than``, waits until a process with
-    another pid has registered (the master keeps a killed node's URI until its successor registers)."""
-    deadline = time.monotonic() + WAIT
-    while True:
-        try:
-            uri = rosnode.get_api_uri(rosgraph.Master("/provider_respawn_test"), name, skip_cache=True)
-            code, _, pid = xmlrpc.client.ServerProxy(uri).getPid("/provider_respawn_test")
-            if code == 1 and pid != other_than:
-                return pid
-        except OSError:  # the URI of the killed process
-            pass
-        if time.monotonic() > deadline:
-            raise AssertionError(f"no process other than {other_than} registered as {name} within {WAIT} s")
-        time.sleep(0.2)
-
-
 class ProviderRespawnTest(unittest.TestCase):
     def setUp(self):
         rospy.init_node("provider_respawn_test")
@@ -144,12 +125,12 @@ class ProviderRespawnTest(unittest.TestCase):
     def test_sigkill_mid_drive_is_respawned_and_resynced(self):
         _, before, keys = self.mirror.wait_for(lambda t, d: d.revision >= 5, "revision 5 (driving)")
         self.mirror.check_against_files(before, keys)
-        pid = node_pid("/provider")
+        pid = node_pid("/provider", "/provider_respawn_test", WAIT)
         killed = time.monotonic()
         os.kill(pid, signal.SIGKILL)
         t, reset, keys = self.mirror.wait_for(lambda t, d: t > killed and d.reset, "reset after the kill")
         recovery = t - killed
-        node_pid("/provider", other_than=pid)  # respawned
+        node_pid("/provider", "/provider_respawn_test", WAIT, other_than=pid)  # respawned
         self.assertTrue(math.isfinite(recovery))
         self.mirror.check_against_files(reset, keys)
         # The drive goes on: later deltas keep the mirror equal to the window.
