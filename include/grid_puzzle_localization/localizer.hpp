@@ -222,6 +222,7 @@ class Localizer {
   std::optional<double> source_stamp_;           // source_ holds the scan of this stamp (for globalLocalize)
   GlobalLocalizer global_;
   std::shared_ptr<const VoxelMap> global_target_;  // the target global_ was given (rebuilt when it changes)
+  Eigen::AlignedBox2d global_map_extent_;          // x y extent of global_target_'s voxel means
   std::optional<double> last_global_search_;       // scan stamp of the last recovery search
 };
 

@@ -196,8 +196,11 @@ GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
     // The search's map is the target's voxel means (what the localizer holds of the map), refined on the target.
     PointCloud means;
     means.reserve(target_->gaussianCount());
+    global_map_extent_.setEmpty();
     target_->forEach([&](const VoxelKey&, const VoxelStats&, const VoxelGaussian& g) {
-      if (g.valid) means.push_back(g.mean);
+      if (!g.valid) return;
+      means.push_back(g.mean);
+      global_map_extent_.extend(g.mean.head<2>().cast<double>());
     });
     global_.setMap(means, target_);
     global_target_ = target_;
@@ -210,7 +213,21 @@ GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
   // A known rotation is still searched over a few steps either side: the search's answer is refined by NDT.
   request.yaw_range =
       region.yaw_range >= M_PI ? 2.0 * M_PI : 2.0 * std::max(region.yaw_range, config_.hypotheses.yaw_step);
-  r = global_.localize(source_, request);
+  // The search scores the fraction of the scan's points that land on map structure. A window of tiles may end
+  // short of the sensor's range: scan points that fall outside the loaded map (grown by the region's radius and a
+  // voxel) at the centre pose cannot score anywhere in the region and are left out, so the fraction is of what
+  // the map can explain. A search over every yaw keeps them all (the centre's heading says nothing there).
+  const PointCloud* scan = &source_;
+  PointCloud inside;
+  if (region.yaw_range < M_PI) {
+    const Eigen::Isometry3f centre = region.centre.cast<float>();
+    const Eigen::Vector2d margin = Eigen::Vector2d::Constant(region.radius + config_.ndt.resolution);
+    const Eigen::AlignedBox2d reach(global_map_extent_.min() - margin, global_map_extent_.max() + margin);
+    for (const Point& p : source_)
+      if (reach.contains((centre * p).head<2>().cast<double>())) inside.push_back(p);
+    scan = &inside;
+  }
+  r = global_.localize(*scan, request);
   if (r.found && !acceptable(r.refinement)) {
     r.found = false;
     r.reason = "the refined pose fails the match gate (match/*)";
