@@ -6,7 +6,9 @@
 #include <Eigen/Geometry>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "grid_puzzle_localization/deskew.hpp"
@@ -104,6 +106,9 @@ struct LocalizerConfig {
   /// Empty when usable, else every bad value with its allowed range (includes the nested configs).
   std::string validate() const;
 };
+
+/// A cell of the coarse 2D coverage of the map (x, y indices).
+using CoverageCell = std::pair<int, int>;
 
 enum class LocalizerState { kWaitingForMap, kWaitingForInitialPose, kTracking };
 const char* toString(LocalizerState state);
@@ -222,7 +227,7 @@ class Localizer {
   std::optional<double> source_stamp_;           // source_ holds the scan of this stamp (for globalLocalize)
   GlobalLocalizer global_;
   std::shared_ptr<const VoxelMap> global_target_;  // the target global_ was given (rebuilt when it changes)
-  Eigen::AlignedBox2d global_map_extent_;          // x y extent of global_target_'s voxel means
+  std::set<CoverageCell> global_map_cells_;        // coarse x y cells holding global_target_'s voxel means
   std::optional<double> last_global_search_;       // scan stamp of the last recovery search
 };
 

@@ -49,6 +49,15 @@ Eigen::Isometry3d toIsometry(const Eigen::Matrix4f& m) {
   return out;
 }
 
+// Cells [m] of the coarse 2D coverage of the search's map, and the most cells of reach around a point that the
+// coverage test looks at (a wider region keeps every point).
+constexpr double kCoverageCell = 4.0;
+constexpr int kMaxCoverageReach = 8;
+
+CoverageCell coverageCell(double x, double y) {
+  return {static_cast<int>(std::floor(x / kCoverageCell)), static_cast<int>(std::floor(y / kCoverageCell))};
+}
+
 // Two matches land on different poses: farther apart than `distance` [m], or turned by more than 0.1 rad.
 bool distinct(const NdtResult& a, const NdtResult& b, double distance) {
   const Eigen::Isometry3d pa = toIsometry(a.transform), pb = toIsometry(b.transform);
@@ -196,11 +205,11 @@ GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
     // The search's map is the target's voxel means (what the localizer holds of the map), refined on the target.
     PointCloud means;
     means.reserve(target_->gaussianCount());
-    global_map_extent_.setEmpty();
+    global_map_cells_.clear();
     target_->forEach([&](const VoxelKey&, const VoxelStats&, const VoxelGaussian& g) {
       if (!g.valid) return;
       means.push_back(g.mean);
-      global_map_extent_.extend(g.mean.head<2>().cast<double>());
+      global_map_cells_.insert(coverageCell(g.mean.x(), g.mean.y()));
     });
     global_.setMap(means, target_);
     global_target_ = target_;
@@ -214,17 +223,23 @@ GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
   request.yaw_range =
       region.yaw_range >= M_PI ? 2.0 * M_PI : 2.0 * std::max(region.yaw_range, config_.hypotheses.yaw_step);
   // The search scores the fraction of the scan's points that land on map structure. A window of tiles may end
-  // short of the sensor's range: scan points that fall outside the loaded map (grown by the region's radius and a
-  // voxel) at the centre pose cannot score anywhere in the region and are left out, so the fraction is of what
-  // the map can explain. A search over every yaw keeps them all (the centre's heading says nothing there).
+  // short of the sensor's range, or still be loading: scan points with no map within the region's radius of where
+  // they fall at the centre pose cannot score anywhere in the region and are left out, so the fraction is of what
+  // the map can explain. A search over every yaw or a wide region keeps them all.
   const PointCloud* scan = &source_;
   PointCloud inside;
-  if (region.yaw_range < M_PI) {
+  const int reach = static_cast<int>(std::ceil((region.radius + config_.ndt.resolution) / kCoverageCell));
+  if (region.yaw_range < M_PI && reach <= kMaxCoverageReach) {
     const Eigen::Isometry3f centre = region.centre.cast<float>();
-    const Eigen::Vector2d margin = Eigen::Vector2d::Constant(region.radius + config_.ndt.resolution);
-    const Eigen::AlignedBox2d reach(global_map_extent_.min() - margin, global_map_extent_.max() + margin);
-    for (const Point& p : source_)
-      if (reach.contains((centre * p).head<2>().cast<double>())) inside.push_back(p);
+    for (const Point& p : source_) {
+      const Point q = centre * p;
+      const CoverageCell c = coverageCell(q.x(), q.y());
+      bool covered = false;
+      for (int i = -reach; i <= reach && !covered; ++i)
+        for (int j = -reach; j <= reach && !covered; ++j)
+          covered = global_map_cells_.count({c.first + i, c.second + j}) > 0;
+      if (covered) inside.push_back(p);
+    }
     scan = &inside;
   }
   r = global_.localize(*scan, request);
@@ -447,6 +462,15 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   if (out.match_accepted) {
     out.pose = found_globally ? *found_globally : toIsometry(out.ndt.transform);
     if (!out.pose.matrix().allFinite()) out.match_accepted = false;
+  }
+  if (fresh && !out.match_accepted && (out.map_update_pending || worker_.busy())) {
+    // The map around a new initial pose may still be loading (a window of tiles arrives over the first scans): the
+    // pose is kept for the next scan instead of being searched from as a lost track.
+    pending_initial_pose_ = predictor_.pose();
+    predictor_ = PosePredictor();
+    out.state = LocalizerState::kWaitingForMap;
+    out.scan_ms = msSince(start);
+    return out;
   }
   out.lost = !out.match_accepted;
   out.since_last_match = fresh ? 0.0 : elapsed;
