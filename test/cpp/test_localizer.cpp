@@ -383,6 +383,30 @@ TEST(Localizer, HandHeldYawSwingAtTwoHertz) {
   EXPECT_GT(run.hypotheses, 0);
 }
 
+// A window of tiles arrives over the first scans: a scan that the initial pose does not match while the map is
+// still loading waits for it (the pose is kept), it is not a lost track searched from that pose.
+TEST(Localizer, InitialPoseWaitsForTheMapStillLoading) {
+  const gpl::PointCloud world = t::makeWorld();
+  gpl::PointCloud far_corner;  // a part of the yard the scan at truthAt(0) hardly sees
+  for (const gpl::Point& p : world)
+    if (p.x() > 20.0f && p.y() > 10.0f) far_corner.push_back(p);
+  gpl::Localizer loc(testConfig());
+  loc.map().submit(gpl::MapChange::fullCloud(far_corner));
+  loc.map().waitIdle();
+  loc.setInitialPose(truthAt(0.0));
+  loc.map().submit(gpl::MapChange::fullCloud(world));  // still being built when the first scan comes
+  const gpl::LocalizerOutput first = loc.processScan(0.0, scanAt(world, 0.0, 1), mount());
+  EXPECT_FALSE(first.lost);
+  if (!first.match_accepted) {
+    EXPECT_EQ(first.state, gpl::LocalizerState::kWaitingForMap);
+    EXPECT_FALSE(first.publish);
+  }
+  loc.map().waitIdle();
+  const gpl::LocalizerOutput second = loc.processScan(0.1, scanAt(world, 0.1, 2), mount());
+  ASSERT_TRUE(second.match_accepted);
+  EXPECT_LT(t::translationError(second.pose, truthAt(0.1)), 0.05);
+}
+
 // Hypotheses cost nothing while the first match is good.
 TEST(Localizer, NoHypothesesOrSearchWhileTrackingIsGood) {
   const DriveRun run = drive(testConfig(), truthAt, stamps(0.0, 3.0, 0.1), truthAt(0.0));
