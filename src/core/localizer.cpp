@@ -49,10 +49,8 @@ Eigen::Isometry3d toIsometry(const Eigen::Matrix4f& m) {
   return out;
 }
 
-// Cells [m] of the coarse 2D coverage of the search's map, and the most cells of reach around a point that the
-// coverage test looks at (a wider region keeps every point).
+// [m] cells of the coarse 2D coverage of the search's map.
 constexpr double kCoverageCell = 4.0;
-constexpr int kMaxCoverageReach = 8;
 
 CoverageCell coverageCell(double x, double y) {
   return {static_cast<int>(std::floor(x / kCoverageCell)), static_cast<int>(std::floor(y / kCoverageCell))};
@@ -223,21 +221,19 @@ GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
   request.yaw_range =
       region.yaw_range >= M_PI ? 2.0 * M_PI : 2.0 * std::max(region.yaw_range, config_.hypotheses.yaw_step);
   // The search scores the fraction of the scan's points that land on map structure. A window of tiles may end
-  // short of the sensor's range, or still be loading: scan points with no map within the region's radius of where
-  // they fall at the centre pose cannot score anywhere in the region and are left out, so the fraction is of what
-  // the map can explain. A search over every yaw or a wide region keeps them all.
+  // short of the sensor's range, or still be loading: scan points with no map within a coverage cell of where they
+  // fall at the centre pose are left out, so the fraction is of what the map can explain around there. A search
+  // over every yaw keeps them all (the centre's heading says nothing there).
   const PointCloud* scan = &source_;
   PointCloud inside;
-  const int reach = static_cast<int>(std::ceil((region.radius + config_.ndt.resolution) / kCoverageCell));
-  if (region.yaw_range < M_PI && reach <= kMaxCoverageReach) {
+  if (region.yaw_range < M_PI) {
     const Eigen::Isometry3f centre = region.centre.cast<float>();
     for (const Point& p : source_) {
       const Point q = centre * p;
       const CoverageCell c = coverageCell(q.x(), q.y());
       bool covered = false;
-      for (int i = -reach; i <= reach && !covered; ++i)
-        for (int j = -reach; j <= reach && !covered; ++j)
-          covered = global_map_cells_.count({c.first + i, c.second + j}) > 0;
+      for (int i = -1; i <= 1 && !covered; ++i)
+        for (int j = -1; j <= 1 && !covered; ++j) covered = global_map_cells_.count({c.first + i, c.second + j}) > 0;
       if (covered) inside.push_back(p);
     }
     scan = &inside;
