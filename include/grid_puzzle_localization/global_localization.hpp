@@ -74,7 +74,9 @@ struct GlobalLocalizationConfig {
     c.transformation_epsilon = 0.001;
     return c;
   }();
-  /// The refined pose must have at least this fraction of scan points within the NDT inlier gate, in [0, 1].
+  /// The refined pose must have at least this fraction of the scan points that land on the map's area (x-y cells of
+  /// ground_cell holding map points) within the NDT inlier gate, in [0, 1]. Points beyond the map (a window of
+  /// tiles that ends short of the sensor's range) say nothing against the pose.
   double min_inlier_fraction = 0.5;
   /// [m] the refinement may move the search's answer at most this far (else it is refused).
   double max_refinement_shift = 2.0;
@@ -121,6 +123,8 @@ struct GlobalLocalizationResult {
   std::size_t candidates_evaluated = 0;  ///< search nodes scored (all levels); varies with threads
   std::size_t scan_points_used = 0;      ///< structure points of the scan the search matched
   NdtResult refinement;                  ///< the NDT refinement of the winner (status INVALID_INPUT if not run)
+  /// Of the refined scan's points that land on the map's area, the fraction within the NDT inlier gate, in [0, 1].
+  double explained_fraction = 0.0;
 };
 
 /// Holds a map and answers global localization requests. Not thread-safe for setMap(); localize() is const and

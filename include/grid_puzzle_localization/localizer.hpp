@@ -6,7 +6,6 @@
 #include <Eigen/Geometry>
 #include <memory>
 #include <optional>
-#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -107,9 +106,6 @@ struct LocalizerConfig {
   std::string validate() const;
 };
 
-/// A cell of the coarse 2D coverage of the map (x, y indices).
-using CoverageCell = std::pair<int, int>;
-
 enum class LocalizerState { kWaitingForMap, kWaitingForInitialPose, kTracking };
 const char* toString(LocalizerState state);
 
@@ -204,10 +200,10 @@ class Localizer {
   /// `guess` (the prediction) when the rotation is not known.
   std::optional<NdtResult> tryHypotheses(const Eigen::Isometry3d& guess, const Eigen::Isometry3d& held,
                                          bool rotation_known, LocalizerOutput& out);
-  /// The predicted sensor motion over the sweep [stamp + t_begin, stamp + t_end]; gyro rotation when covered.
-  /// `fused` (the window's prediction) gives the linear velocity when there is one.
+  /// The predicted sensor motion over the sweep [stamp + t_begin, stamp + t_end]; gyro rotation when covered;
+  /// no translation when `velocity_unknown`, else `fused` (the window's prediction) gives the linear velocity if any.
   SweepMotion sweepMotion(double stamp, double t_begin, double t_end, const Eigen::Isometry3d& base_T_sensor,
-                          bool fresh, const std::optional<FusedState>& fused) const;
+                          bool velocity_unknown, const std::optional<FusedState>& fused) const;
 
   LocalizerConfig config_;
   Preprocessor preprocessor_;
@@ -227,7 +223,6 @@ class Localizer {
   std::optional<double> source_stamp_;           // source_ holds the scan of this stamp (for globalLocalize)
   GlobalLocalizer global_;
   std::shared_ptr<const VoxelMap> global_target_;  // the target global_ was given (rebuilt when it changes)
-  std::set<CoverageCell> global_map_cells_;        // coarse x y cells holding global_target_'s voxel means
   std::optional<double> last_global_search_;       // scan stamp of the last recovery search
 };
 

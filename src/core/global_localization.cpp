@@ -46,7 +46,11 @@ struct ScanStructure {
   double reach = 0.0;  ///< [m] farthest point from the sensor
 };
 
-ScanStructure scanStructure(const std::vector<StructurePoint>& points, const GlobalLocalizationConfig& cfg) {
+/// The scan's structure points, one per search cell and height band, at most max_scan_points of them. With
+/// `on_map`, only those for which it holds (where the point may land on the map).
+template <class OnMap>
+ScanStructure scanStructure(const std::vector<StructurePoint>& points, const GlobalLocalizationConfig& cfg,
+                            OnMap&& on_map) {
   ScanStructure all;
   std::unordered_set<std::int64_t> seen;
   for (const StructurePoint& p : points) {
@@ -54,7 +58,7 @@ ScanStructure scanStructure(const std::vector<StructurePoint>& points, const Glo
     if (band < 0) continue;
     const auto cx = static_cast<std::int64_t>(std::floor(p.xy.x() / cfg.resolution));
     const auto cy = static_cast<std::int64_t>(std::floor(p.xy.y() / cfg.resolution));
-    if (!seen.insert(cellKey(cx * 16 + band, cy)).second) continue;
+    if (!seen.insert(cellKey(cx * 16 + band, cy)).second || !on_map(p.xy)) continue;
     all.xy.push_back(p.xy);
     all.band.push_back(band);
   }
@@ -242,8 +246,25 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
   }
   if (finite.empty()) return refused(result, "the scan has no finite points: check the scan topic or file", start);
   const GroundCells scan_ground(leveled, cfg.ground_cell);
-  const ScanStructure points =
-      scanStructure(structurePoints(leveled, scan_ground, cfg.height_bands.front(), cfg.height_bands.back()), cfg);
+  // With a known heading, scan points that cannot land on the map from anywhere in the search square are left out:
+  // a window of tiles may end short of the sensor's range, or still be loading, and the score is the fraction of
+  // what the map can explain there. Over every yaw all are kept (the heading says nothing of where they land).
+  const bool heading_known = request.yaw_range < kTwoPi / 2;
+  const Eigen::Rotation2Dd heading(request.yaw_center);
+  const Eigen::Vector2d centre(request.center_x, request.center_y);
+  const double reach_on_map = request.size / 2 + cfg.ground_cell;
+  std::unordered_map<std::int64_t, bool> on_map_cache;
+  auto may_land_on_map = [&](const Eigen::Vector2d& xy) {
+    if (!heading_known) return true;
+    const Eigen::Vector2d q = centre + heading * xy;
+    const std::int64_t key = cellKey(static_cast<std::int64_t>(std::floor(q.x() / cfg.ground_cell)),
+                                     static_cast<std::int64_t>(std::floor(q.y() / cfg.ground_cell)));
+    const auto it = on_map_cache.find(key);
+    if (it != on_map_cache.end()) return it->second;
+    return on_map_cache[key] = map_->ground.holdsNear(q.x(), q.y(), reach_on_map);
+  };
+  const ScanStructure points = scanStructure(
+      structurePoints(leveled, scan_ground, cfg.height_bands.front(), cfg.height_bands.back()), cfg, may_land_on_map);
   result.scan_points_used = points.xy.size();
   if (points.xy.size() < static_cast<std::size_t>(cfg.min_scan_points)) {
     std::ostringstream msg;
@@ -392,8 +413,15 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
   result.confidence = result.fit > 0.0 ? std::clamp(1.0 - result.runner_up_fit / result.fit, 0.0, 1.0) : 0.0;
   result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 
+  std::size_t on_map = 0;
+  for (const Point& p : source) {
+    const Eigen::Vector3d q = best.pose * p.cast<double>();
+    on_map += map_->ground.holds(q.x(), q.y());
+  }
+  const double inliers = best.ndt.inlier_fraction * static_cast<double>(source.size());
+  result.explained_fraction = on_map ? std::min(1.0, inliers / static_cast<double>(on_map)) : 0.0;
+
   std::ostringstream why;
-  const NdtResult& ndt = result.refinement;
   const double shift = (best.pose.translation() - best.guess.translation()).head<2>().norm();
   if (unrefined)
     why << "ambiguous: more than refine_candidates = " << cfg.refine_candidates << " distinct places score within "
@@ -402,9 +430,9 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
     why << "ambiguous: another place fits the scan " << result.runner_up_fit << " against the best " << result.fit
         << " (NDT fit, max_runner_up_ratio " << cfg.max_runner_up_ratio
         << "): search a smaller area or give a better centre";
-  else if (ndt.inlier_fraction < cfg.min_inlier_fraction)
-    why << "the refined pose explains only " << ndt.inlier_fraction << " of the scan (min_inlier_fraction "
-        << cfg.min_inlier_fraction << ")";
+  else if (result.explained_fraction < cfg.min_inlier_fraction)
+    why << "the refined pose explains only " << result.explained_fraction
+        << " of the scan points on the map's area (min_inlier_fraction " << cfg.min_inlier_fraction << ")";
   else if (shift > cfg.max_refinement_shift)
     why << "the NDT refinement moved the search's answer by " << shift << " m (max_refinement_shift "
         << cfg.max_refinement_shift << ")";

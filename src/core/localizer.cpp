@@ -49,13 +49,6 @@ Eigen::Isometry3d toIsometry(const Eigen::Matrix4f& m) {
   return out;
 }
 
-// [m] cells of the coarse 2D coverage of the search's map.
-constexpr double kCoverageCell = 4.0;
-
-CoverageCell coverageCell(double x, double y) {
-  return {static_cast<int>(std::floor(x / kCoverageCell)), static_cast<int>(std::floor(y / kCoverageCell))};
-}
-
 // Two matches land on different poses: farther apart than `distance` [m], or turned by more than 0.1 rad.
 bool distinct(const NdtResult& a, const NdtResult& b, double distance) {
   const Eigen::Isometry3d pa = toIsometry(a.transform), pb = toIsometry(b.transform);
@@ -203,11 +196,9 @@ GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
     // The search's map is the target's voxel means (what the localizer holds of the map), refined on the target.
     PointCloud means;
     means.reserve(target_->gaussianCount());
-    global_map_cells_.clear();
     target_->forEach([&](const VoxelKey&, const VoxelStats&, const VoxelGaussian& g) {
       if (!g.valid) return;
       means.push_back(g.mean);
-      global_map_cells_.insert(coverageCell(g.mean.x(), g.mean.y()));
     });
     global_.setMap(means, target_);
     global_target_ = target_;
@@ -220,25 +211,7 @@ GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
   // A known rotation is still searched over a few steps either side: the search's answer is refined by NDT.
   request.yaw_range =
       region.yaw_range >= M_PI ? 2.0 * M_PI : 2.0 * std::max(region.yaw_range, config_.hypotheses.yaw_step);
-  // The search scores the fraction of the scan's points that land on map structure. A window of tiles may end
-  // short of the sensor's range, or still be loading: scan points with no map within a coverage cell of where they
-  // fall at the centre pose are left out, so the fraction is of what the map can explain around there. A search
-  // over every yaw keeps them all (the centre's heading says nothing there).
-  const PointCloud* scan = &source_;
-  PointCloud inside;
-  if (region.yaw_range < M_PI) {
-    const Eigen::Isometry3f centre = region.centre.cast<float>();
-    for (const Point& p : source_) {
-      const Point q = centre * p;
-      const CoverageCell c = coverageCell(q.x(), q.y());
-      bool covered = false;
-      for (int i = -1; i <= 1 && !covered; ++i)
-        for (int j = -1; j <= 1 && !covered; ++j) covered = global_map_cells_.count({c.first + i, c.second + j}) > 0;
-      if (covered) inside.push_back(p);
-    }
-    scan = &inside;
-  }
-  r = global_.localize(*scan, request);
+  r = global_.localize(source_, request);
   if (r.found && !acceptable(r.refinement)) {
     r.found = false;
     r.reason = "the refined pose fails the match gate (match/*)";
@@ -296,11 +269,12 @@ bool Localizer::acceptable(const NdtResult& r) const {
 }
 
 SweepMotion Localizer::sweepMotion(double stamp, double t_begin, double t_end, const Eigen::Isometry3d& base_T_sensor,
-                                   bool fresh, const std::optional<FusedState>& fused) const {
-  // Right after an initial pose there is no motion estimate: the scan is taken as if the sensor stood still.
-  Twist twist = fresh ? Twist::Zero() : predictor_.smoothedTwist();
-  if (fused && !fresh) twist.head<3>() = fused->pose.rotation().transpose() * fused->velocity;
-  if (fresh || !config_.imu.use_gyro || !gyro_.covers(stamp + t_begin, stamp + t_end, config_.imu.max_gap))
+                                   bool velocity_unknown, const std::optional<FusedState>& fused) const {
+  // Without a velocity (right after an initial pose, after a gap) the sensor is taken to stand still but for the
+  // rotation the gyro measured over the sweep.
+  Twist twist = velocity_unknown ? Twist::Zero() : predictor_.smoothedTwist();
+  if (fused && !velocity_unknown) twist.head<3>() = fused->pose.rotation().transpose() * fused->velocity;
+  if (!config_.imu.use_gyro || !gyro_.covers(stamp + t_begin, stamp + t_end, config_.imu.max_gap))
     return SweepMotion::fromTwist(twist, base_T_sensor, t_begin, t_end);
   auto rotation = [&](double t) {
     return t >= 0.0 ? gyro_.integrate(stamp, stamp + t) : gyro_.integrate(stamp + t, stamp).inverse();

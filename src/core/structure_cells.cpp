@@ -18,8 +18,7 @@ std::int64_t GroundCells::keyOf(double x, double y) const {
 
 double GroundCells::lowest(double x, double y) const { return lowest_.at(keyOf(x, y)); }
 
-bool GroundCells::heightNear(double x, double y, double radius, double* height) const {
-  std::vector<double> near;
+bool GroundCells::visitNear(double x, double y, double radius, const std::function<bool(double)>& visit) const {
   const int r = static_cast<int>(std::ceil(radius / cell_));
   const auto cx = static_cast<std::int64_t>(std::floor(x / cell_));
   const auto cy = static_cast<std::int64_t>(std::floor(y / cell_));
@@ -29,12 +28,25 @@ bool GroundCells::heightNear(double x, double y, double radius, double* height) 
       const double ey = (static_cast<double>(cy + dy) + 0.5) * cell_ - y;
       if (ex * ex + ey * ey > radius * radius) continue;
       const auto it = lowest_.find(cellKey(cx + dx, cy + dy));
-      if (it != lowest_.end()) near.push_back(it->second);
+      if (it != lowest_.end() && visit(it->second)) return true;
     }
+  return false;
+}
+
+bool GroundCells::heightNear(double x, double y, double radius, double* height) const {
+  std::vector<double> near;
+  visitNear(x, y, radius, [&near](double lowest) {
+    near.push_back(lowest);
+    return false;
+  });
   if (near.empty()) return false;
   std::nth_element(near.begin(), near.begin() + near.size() / 2, near.end());
   *height = near[near.size() / 2];
   return true;
+}
+
+bool GroundCells::holdsNear(double x, double y, double radius) const {
+  return visitNear(x, y, radius, [](double) { return true; });
 }
 
 std::vector<StructurePoint> structurePoints(const std::vector<Eigen::Vector3d>& points, const GroundCells& ground,

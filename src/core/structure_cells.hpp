@@ -4,6 +4,7 @@
 
 #include <Eigen/Core>
 #include <cstdint>
+#include <functional>
 #include <unordered_map>
 #include <vector>
 
@@ -24,9 +25,15 @@ class GroundCells {
   double lowest(double x, double y) const;
   /// Median of the lowest z of the cells whose centre lies within `radius` of (x, y); false when there is none.
   bool heightNear(double x, double y, double radius, double* height) const;
+  /// Whether the cell holding (x, y) holds a point given to the constructor.
+  bool holds(double x, double y) const { return lowest_.count(keyOf(x, y)) > 0; }
+  /// Whether a cell whose centre lies within `radius` of (x, y) holds a point given to the constructor.
+  bool holdsNear(double x, double y, double radius) const;
 
  private:
   std::int64_t keyOf(double x, double y) const;
+  /// Calls `visit` with the lowest z of each cell near (x, y) holding points until it returns true; true if it did.
+  bool visitNear(double x, double y, double radius, const std::function<bool(double)>& visit) const;
   double cell_;
   std::unordered_map<std::int64_t, double> lowest_;
 };

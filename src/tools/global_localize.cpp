@@ -176,7 +176,8 @@ std::string json(const gpl::GlobalLocalizationResult& r, double cpu_seconds) {
      << ", \"candidates_evaluated\": " << r.candidates_evaluated << ", \"scan_points_used\": " << r.scan_points_used
      << ", \"cpu_seconds\": " << cpu_seconds
      << ", \"ndt_transformation_probability\": " << r.refinement.transformation_probability
-     << ", \"ndt_inlier_fraction\": " << r.refinement.inlier_fraction << ", \"ndt_status\": \""
+     << ", \"ndt_inlier_fraction\": " << r.refinement.inlier_fraction
+     << ", \"explained_fraction\": " << r.explained_fraction << ", \"ndt_status\": \""
      << gpl::toString(r.refinement.status) << "\", \"reason\": \"" << reason << "\"}";
   return js.str();
 }

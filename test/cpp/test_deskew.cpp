@@ -139,16 +139,17 @@ Eigen::Isometry3d yardTruth(double time) {
   return t::poseXYYaw(-20.0 + 6.0 * time, 2.0 * std::sin(0.4 * time), std::atan2(0.8 * std::cos(0.4 * time), 6.0));
 }
 
-void spinningScan(const gpl::PointCloud& world, double stamp, unsigned seed, gpl::PointCloud& scan,
+template <class Truth>
+void spinningScan(const gpl::PointCloud& world, Truth&& truth, double stamp, unsigned seed, gpl::PointCloud& scan,
                   gpl::PointTimes& times) {
-  const gpl::PointCloud at_stamp = t::scanFrom(world, yardTruth(stamp) * mount(), 30.0f, 0.01f, seed);
-  const Eigen::Isometry3d map_T_sensor0 = yardTruth(stamp) * mount();
+  const gpl::PointCloud at_stamp = t::scanFrom(world, truth(stamp) * mount(), 30.0f, 0.01f, seed);
+  const Eigen::Isometry3d map_T_sensor0 = truth(stamp) * mount();
   scan.clear();
   times.clear();
   for (const gpl::Point& p : at_stamp) {
     const double time = kSweep * (std::atan2(p.y(), p.x()) + M_PI) / (2.0 * M_PI);
     const Eigen::Vector3d world_p = map_T_sensor0 * p.cast<double>();
-    scan.push_back(((yardTruth(stamp + time) * mount()).inverse() * world_p).cast<float>());
+    scan.push_back(((truth(stamp + time) * mount()).inverse() * world_p).template cast<float>());
     times.push_back(static_cast<float>(time));
   }
 }
@@ -168,7 +169,7 @@ double worstError(bool deskew) {
   double worst = 0.0;
   for (int i = 0; i <= 40; ++i) {
     const double stamp = 0.1 * i;
-    spinningScan(world, stamp, 100 + i, scan, times);
+    spinningScan(world, yardTruth, stamp, 100 + i, scan, times);
     const gpl::LocalizerOutput out = loc.processScan(stamp, scan, mount(), &times);
     EXPECT_EQ(out.preprocess.deskewed, deskew);
     // Scans 0 and 1 are matched without a measured motion (not deskewed, 0.5 m behind along the smear); scan 2,
@@ -188,4 +189,46 @@ TEST(Deskew, LocalizerPoseIsThePoseAtTheStampWhenScansAreDeskewed) {
   RecordProperty("worst_error_deskewed_m", std::to_string(deskewed));
   EXPECT_LT(deskewed, 0.05);
   EXPECT_LT(deskewed, 0.5 * skewed);
+}
+
+namespace {
+
+// A sensor turning on the spot at 3 rad/s (a hand-held swing): 17 deg within one sweep.
+Eigen::Isometry3d turningTruth(double time) { return t::poseXYYaw(-5.0, 1.0, 0.3 + 3.0 * time); }
+
+// The worst rotation error [rad] over the first scans after an exact initial pose, which have no measured
+// velocity; with a gyro its rotation deskews them (the body-frame rate is the truth's, 3 rad/s about z).
+double worstTurningRotationError(bool gyro) {
+  const gpl::PointCloud world = t::makeWorld();
+  gpl::LocalizerConfig c;
+  c.preprocess.voxel_size = 0.4;
+  c.preprocess.max_range = 30.0;
+  c.preprocess.deskew = true;
+  gpl::Localizer loc(c);
+  loc.map().submit(gpl::MapChange::fullCloud(world));
+  loc.map().waitIdle();
+  loc.setInitialPose(turningTruth(0.0));
+  if (gyro)
+    for (double t = -0.1; t < 0.5; t += 0.005) loc.addGyro(t, Eigen::Vector3d(0.0, 0.0, 3.0));
+  gpl::PointCloud scan;
+  gpl::PointTimes times;
+  double worst = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    const double stamp = 0.1 * i;
+    spinningScan(world, turningTruth, stamp, 200 + i, scan, times);
+    const gpl::LocalizerOutput out = loc.processScan(stamp, scan, mount(), &times);
+    worst = std::max(worst, out.match_accepted ? t::rotationError(out.pose, turningTruth(stamp)) : M_PI);
+  }
+  return worst;
+}
+
+}  // namespace
+
+TEST(Deskew, AGyroDeskewsTheScansRightAfterAnInitialPose) {
+  const double with_gyro = worstTurningRotationError(true);
+  const double without = worstTurningRotationError(false);
+  RecordProperty("worst_rotation_error_with_gyro_deg", std::to_string(with_gyro * 180.0 / M_PI));
+  RecordProperty("worst_rotation_error_without_deg", std::to_string(without * 180.0 / M_PI));
+  EXPECT_LT(with_gyro, 0.5 * M_PI / 180.0);
+  EXPECT_LT(with_gyro, 0.5 * without);
 }

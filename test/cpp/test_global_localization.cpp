@@ -210,6 +210,27 @@ TEST_F(GlobalLocalizerTest, FindsAKnownPoseAnywhereInTheSearchSquareAndAnyYaw) {
   EXPECT_LE(r.grid_seconds + r.search_seconds + r.refine_seconds, r.seconds);
 }
 
+TEST_F(GlobalLocalizerTest, JudgesTheScanOnlyWhereTheMapReaches) {
+  // A window of tiles that ends well inside the sensor's range: most of the scan lands beyond the map. The
+  // answer is judged on the points that land on the map's area, so it is found, and those it explains are most.
+  const Eigen::Isometry3d truth = poseXYYaw(3.0, -2.0, 0.6, 1.8);
+  gpl::PointCloud window;
+  for (const gpl::Point& p : *world_)
+    if (std::abs(p.x() - 3.0f) < 10.0f && std::abs(p.y() + 2.0f) < 10.0f) window.push_back(p);
+  gpl::GlobalLocalizer localizer(config());
+  localizer.setMap(window);
+  const gpl::PointCloud scan = scanFrom(*world_, truth, 40.0f, 0.02f, 4);
+  gpl::GlobalSearchRequest request = around(3.0, -2.0, 4.0);
+  request.yaw_center = 0.6;
+  request.yaw_range = 0.5;
+  const gpl::GlobalLocalizationResult r = localizer.localize(scan, request);
+  ASSERT_TRUE(r.found) << r.reason;
+  EXPECT_LT(translationError(r.map_T_base, truth), 0.05);
+  EXPECT_LT(r.refinement.inlier_fraction, localizer.config().min_inlier_fraction);  // of the whole scan
+  EXPECT_GE(r.explained_fraction, localizer.config().min_inlier_fraction);
+  EXPECT_LE(r.explained_fraction, 1.0);
+}
+
 TEST_F(GlobalLocalizerTest, UsesGravityForRollAndPitch) {
   gpl::GlobalLocalizer localizer(config());
   localizer.setMap(*world_);
