@@ -27,6 +27,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <iomanip>
 #include <map>
 #include <set>
 #include <stdexcept>
@@ -294,7 +295,7 @@ int main(int argc, char** argv) {
     }
     trace << "scan,stamp_s,scan_ms,align_ms,cpu_ms,iterations,evaluations,source_points,update_pending,"
              "prediction_to_match_m,prediction_to_match_rad,prediction_error_m,prediction_error_rad,error_m,error_rad,"
-             "truth_yaw_rate_rad_s,accepted,published,global_search,nvtl\n";
+             "truth_yaw_rate_rad_s,accepted,published,hypotheses,global_search,nvtl,global_search_reason\n";
   }
   std::vector<double> latency, latency_pending, latency_quiet, cpu, update_ms, errors;
   double first_scan_ms = 0.0;
@@ -330,7 +331,9 @@ int main(int argc, char** argv) {
     if (trace.is_open()) {
       const double dt = scan.stamp - last_stamp;
       const double yaw_rate = dt > 0.0 ? rotationAngle(last_truth, scan.truth) / dt : 0.0;
-      trace << i << ',' << scan.stamp << ',' << out.scan_ms << ',' << out.align_ms << ',' << cpu_ms << ','
+      std::string reason = out.global_search_reason;
+      std::replace(reason.begin(), reason.end(), '"', '\'');
+      trace << i << ',' << std::fixed << std::setprecision(3) << scan.stamp << std::defaultfloat << ',' << out.scan_ms << ',' << out.align_ms << ',' << cpu_ms << ','
             << out.ndt.iterations << ',' << out.ndt.evaluations << ',' << out.ndt.source_points << ','
             << (out.map_update_pending || out.map_swapped) << ','
             << (out.prediction.translation() - out.pose.translation()).norm() << ','
@@ -338,8 +341,8 @@ int main(int argc, char** argv) {
             << (out.prediction.translation() - scan.truth.translation()).norm() << ','
             << rotationAngle(out.prediction, scan.truth) << ','
             << (out.pose.translation() - scan.truth.translation()).norm() << ',' << rotationAngle(out.pose, scan.truth)
-            << ',' << yaw_rate << ',' << out.match_accepted << ',' << out.publish << ',' << out.global_search << ','
-            << out.ndt.nvtl << '\n';
+            << ',' << yaw_rate << ',' << out.match_accepted << ',' << out.publish << ',' << out.hypotheses << ','
+            << out.global_search << ',' << out.ndt.nvtl << ",\"" << reason << "\"\n";
     }
     if (!out.match_accepted) ++rejected;
     errors.push_back((out.pose.translation() - scan.truth.translation()).norm());

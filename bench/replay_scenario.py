@@ -7,6 +7,7 @@ playback through `gpm experiment` takes a few seconds here. --trace FILE keeps t
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import os
 import subprocess
@@ -76,14 +77,17 @@ def main() -> int:
         if done.returncode != 0:
             sys.stderr.write(done.stderr.decode())
             return done.returncode
-        rows = np.genfromtxt(trace, delimiter=",", names=True)
+        with open(trace, newline="") as f:
+            table = list(csv.DictReader(f))
+    columns = ("published", "accepted", "global_search", "error_m", "scan_ms")
+    rows = {name: np.array([float(r[name]) for r in table]) for name in columns}
     published = rows["published"] > 0
     errors = rows["error_m"][published]
     print(
         json.dumps(
             {
                 "scenario": str(args.scenario),
-                "scans": len(rows),
+                "scans": len(table),
                 "accepted": int((rows["accepted"] > 0).sum()),
                 "published": int(published.sum()),
                 "global_searches": int((rows["global_search"] > 0).sum()),
