@@ -333,9 +333,9 @@ int main(int argc, char** argv) {
       const double yaw_rate = dt > 0.0 ? rotationAngle(last_truth, scan.truth) / dt : 0.0;
       std::string reason = out.global_search_reason;
       std::replace(reason.begin(), reason.end(), '"', '\'');
-      trace << i << ',' << std::fixed << std::setprecision(3) << scan.stamp << std::defaultfloat << ',' << out.scan_ms << ',' << out.align_ms << ',' << cpu_ms << ','
-            << out.ndt.iterations << ',' << out.ndt.evaluations << ',' << out.ndt.source_points << ','
-            << (out.map_update_pending || out.map_swapped) << ','
+      trace << i << ',' << std::fixed << std::setprecision(3) << scan.stamp << std::defaultfloat << ',' << out.scan_ms
+            << ',' << out.align_ms << ',' << cpu_ms << ',' << out.ndt.iterations << ',' << out.ndt.evaluations << ','
+            << out.ndt.source_points << ',' << (out.map_update_pending || out.map_swapped) << ','
             << (out.prediction.translation() - out.pose.translation()).norm() << ','
             << rotationAngle(out.prediction, out.pose) << ','
             << (out.prediction.translation() - scan.truth.translation()).norm() << ','
