@@ -106,6 +106,11 @@ struct LocalizerConfig {
   std::string validate() const;
 };
 
+/// The localizer's branch-and-bound search: `config.global` refined on the localizer's own NDT target (its voxel
+/// parameters and search method), with a likelihood spread of at least half a voxel (the search's map is the
+/// target's voxel means).
+GlobalLocalizationConfig globalSearchConfig(const LocalizerConfig& config);
+
 enum class LocalizerState { kWaitingForMap, kWaitingForInitialPose, kTracking };
 const char* toString(LocalizerState state);
 
@@ -196,6 +201,8 @@ class Localizer {
   /// The branch-and-bound search of `region` on the current source and target (the map given to it first
   /// when the target changed); found only when its refinement also passes the match gate.
   GlobalLocalizationResult searchGlobally(const SearchRegion& region);
+  /// Tracks from `pose` at `stamp` with no motion known yet (an initial pose, a global search's answer).
+  void startFrom(const Eigen::Isometry3d& pose, double stamp, const Matrix6d& covariance, double reference_nvtl);
   /// The best acceptable match among the hypotheses: `held` (the last accepted pose) and yaw offsets around
   /// `guess` (the prediction) when the rotation is not known.
   std::optional<NdtResult> tryHypotheses(const Eigen::Isometry3d& guess, const Eigen::Isometry3d& held,

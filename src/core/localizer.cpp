@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <sstream>
 #include <stdexcept>
 #include <utility>
 
@@ -20,18 +19,6 @@ VoxelMapParams workerParams(const LocalizerConfig& config) {
   VoxelMapParams p = config.ndt;
   p.threads = config.map_update_threads;
   return p;
-}
-
-// The search's NDT refinement runs on the localizer's target: same voxel parameters and search method. Its map is
-// the target's voxel means, one point per NDT voxel: a search grid finer than the voxels would leave most cells of
-// a wall empty between the means, so the grid is at least as coarse as the voxels (and blurred in proportion).
-GlobalLocalizationConfig globalConfig(const LocalizerConfig& config) {
-  GlobalLocalizationConfig g = config.global;
-  const double epsilon = g.ndt.transformation_epsilon;
-  g.ndt = config.ndt;
-  g.ndt.transformation_epsilon = epsilon;
-  g.blur_sigma = std::max(g.blur_sigma, 0.5 * config.ndt.resolution);
-  return g;
 }
 
 const LocalizerConfig& validated(const LocalizerConfig& config) {
@@ -80,67 +67,13 @@ Matrix6d coastingCovariance(const Matrix6d& last, const SearchRegion& region, co
 
 }  // namespace
 
-std::string MatchConfig::validate() const {
-  std::ostringstream err;
-  if (!(min_nvtl >= 0.0)) err << "match/min_nvtl must be >= 0 (got " << min_nvtl << "); ";
-  if (!(min_transformation_probability >= 0.0))
-    err << "match/min_transformation_probability must be >= 0 (got " << min_transformation_probability << "); ";
-  return err.str();
-}
-
-std::string ImuConfig::validate() const {
-  return max_gap >= 0.0 ? "" : "imu/max_gap must be >= 0 s (got " + std::to_string(max_gap) + "); ";
-}
-
-std::string HypothesesConfig::validate() const {
-  std::ostringstream err;
-  if (!(yaw_step > 0.0)) err << "hypotheses/yaw_step must be > 0 rad (got " << yaw_step << "); ";
-  if (!(yaw_count >= 0)) err << "hypotheses/yaw_count must be >= 0 (got " << yaw_count << "); ";
-  if (!(refine >= 1)) err << "hypotheses/refine must be >= 1 (got " << refine << "); ";
-  if (!(screen_points >= 10)) err << "hypotheses/screen_points must be >= 10 (got " << screen_points << "); ";
-  if (!(poor_nvtl_ratio >= 0.0 && poor_nvtl_ratio <= 1.0))
-    err << "hypotheses/poor_nvtl_ratio must be in [0, 1] (got " << poor_nvtl_ratio << "); ";
-  return err.str();
-}
-
-std::string LostConfig::validate() const {
-  std::ostringstream err;
-  if (!(max_coast_time > 0.0)) err << "lost/max_coast_time must be > 0 s (got " << max_coast_time << "); ";
-  if (!(search_period > 0.0)) err << "lost/search_period must be > 0 s (got " << search_period << "); ";
-  return err.str();
-}
-
-std::string LocalizerConfig::validate() const {
-  std::ostringstream err;
-  err << preprocess.validate() << ndt.validate() << covariance.validate() << match.validate() << imu.validate()
-      << prediction.validate() << hypotheses.validate() << lost.validate();
-  err << fusion.validate();
-  const std::string global_problem = globalConfig(*this).validate();
-  if (!global_problem.empty()) err << "global_localization: " << global_problem << "; ";
-  if (!(map_update_threads >= 0)) err << "map_update_threads must be >= 0 (0 = all cores); ";
-  if (!(time_jump_back > 0.0)) err << "time_jump_back must be > 0 s (got " << time_jump_back << "); ";
-  return err.str();
-}
-
-const char* toString(LocalizerState state) {
-  switch (state) {
-    case LocalizerState::kWaitingForMap:
-      return "waiting_for_map";
-    case LocalizerState::kWaitingForInitialPose:
-      return "waiting_for_initial_pose";
-    case LocalizerState::kTracking:
-      return "tracking";
-  }
-  return "unknown";
-}
-
 Localizer::Localizer(const LocalizerConfig& config)
     : config_(validated(config)),
       preprocessor_(config.preprocess),
       aligner_(config.ndt),
       worker_(workerParams(config)),
       fusion_(config.fusion),
-      global_(globalConfig(config)) {}
+      global_(globalSearchConfig(config)) {}
 
 void Localizer::setInitialPose(const Eigen::Isometry3d& map_T_base) { pending_initial_pose_ = map_T_base; }
 
@@ -224,14 +157,19 @@ GlobalLocalizationResult Localizer::globalLocalize(const SearchRegion& region) {
   if (!r.found) return r;
   // The pose of the last scan, at its stamp: the next scans search around it with a radius that grows with
   // the time since (the vehicle may move while the search runs), as after any pose without a velocity.
-  pending_initial_pose_.reset();
-  predictor_.reset(r.map_T_base, *source_stamp_);
-  motion_seen_ = MotionBounds();
-  last_covariance_ = matchCovariance(r.refinement, config_.covariance);
-  reference_nvtl_ = r.refinement.nvtl;
-  last_global_search_.reset();
+  startFrom(r.map_T_base, *source_stamp_, matchCovariance(r.refinement, config_.covariance), r.refinement.nvtl);
   fusion_.reset();  // the next scan starts a new window at the pose found
   return r;
+}
+
+void Localizer::startFrom(const Eigen::Isometry3d& pose, double stamp, const Matrix6d& covariance,
+                          double reference_nvtl) {
+  pending_initial_pose_.reset();
+  predictor_.reset(pose, stamp);
+  motion_seen_ = MotionBounds();
+  last_covariance_ = covariance;
+  reference_nvtl_ = reference_nvtl;
+  last_global_search_.reset();
 }
 
 std::optional<NdtResult> Localizer::tryHypotheses(const Eigen::Isometry3d& guess, const Eigen::Isometry3d& held,
@@ -315,14 +253,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     return out;
   }
   const bool fresh = pending_initial_pose_.has_value();
-  if (fresh) {
-    predictor_.reset(*pending_initial_pose_, stamp);
-    pending_initial_pose_.reset();
-    motion_seen_ = MotionBounds();
-    last_covariance_ = predictionCovariance(config_.covariance);
-    reference_nvtl_ = 0.0;
-    last_global_search_.reset();
-  }
+  if (fresh) startFrom(*pending_initial_pose_, stamp, predictionCovariance(config_.covariance), 0.0);
   if (!predictor_.initialized()) {
     // Kept (not deskewed: no motion is known) for a global search started while waiting.
     preprocessor_.apply(scan, source_, &out.preprocess);
