@@ -14,6 +14,7 @@ NdtStatus toStatusMsg(const LocalizerOutput& out, const std_msgs::Header& header
   msg.nvtl = out.ndt.nvtl;
   msg.inlier_fraction = out.ndt.inlier_fraction;
   msg.align_time_ms = out.align_ms;
+  msg.scan_time_ms = out.scan_ms;
   msg.target_update_time_ms = target_update_ms;
   msg.target_voxels = out.target_voxels;
   msg.target_points = out.target_points;

@@ -12,6 +12,7 @@ from matplotlib.image import imread
 from process_check import processes_on
 
 from grid_puzzle_localization.cli import main
+from grid_puzzle_localization.evaluation.scan_times import read_scan_times
 from grid_puzzle_localization.evaluation.trajectory import read_tum
 from grid_puzzle_localization.monitor.log import read_csv
 from grid_puzzle_localization.report.build import read_json
@@ -46,6 +47,11 @@ def test_every_output_exists_and_parses(run):
         log = read_csv(out / mode / "monitor.csv")
         assert "/localizer_manager" in log.names and len(log) >= 10
         assert json.loads((out / mode / "monitor.json").read_text())["samples"] == len(log)
+        # One status per scan matched, with the time it took: every published pose has one.
+        times = read_scan_times(out / mode / "scan_times.csv")
+        assert len(times) >= len(traj) and np.all(times[:, 1] >= times[:, 2]) and np.all(times[:, 2] > 0)
+        assert summary["modes"][mode]["scan_time_ms"]["scans"] == len(times)
+    assert "## Time per scan" in (out / "report.md").read_text()
     storage = summary["storage"]["tiles"]
     assert storage["data_overhead_bytes"] == 0 and storage["points_tiles"] == storage["points_map"]
 

@@ -7,9 +7,12 @@ import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from grid_puzzle_localization.evaluation.metrics import PairedErrors, interpolated_errors, paired_errors
 from grid_puzzle_localization.evaluation.paper import PAPER_FIGURES
 from grid_puzzle_localization.evaluation.resources import compare_to_baseline, mode_resources
+from grid_puzzle_localization.evaluation.scan_times import summarize_scan_times
 from grid_puzzle_localization.evaluation.trajectory import Trajectory
 from grid_puzzle_localization.monitor.log import MonitorLog
 
@@ -25,6 +28,7 @@ class ModeRun:
     trajectory: Trajectory
     monitor: MonitorLog
     roles: Mapping[str, str]
+    scan_times: np.ndarray | None = None  # (n, 3) rows of evaluation.scan_times, when recorded
 
 
 def _errors(errors: PairedErrors) -> dict:
@@ -54,6 +58,7 @@ def summarize_experiment(
             "resources": mode_resources(run.mode, run.roles, run.monitor),
             "ape": None if ape is None else _errors(ape),
             "events": [dataclasses.asdict(e) for e in run.monitor.events],
+            "scan_time_ms": None if run.scan_times is None else summarize_scan_times(run.scan_times),
         }
     by_mode = {run.mode: run for run in runs}
     between = {}

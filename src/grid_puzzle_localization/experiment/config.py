@@ -66,6 +66,7 @@ class ExperimentConfig:
     initial_pose: list[float] | None = None  # x y z roll pitch yaw [m, rad]; None: first ground-truth pose
     roles: NodeRoles = field(default_factory=NodeRoles)
     launch_file: str = "localization.launch"  # of this package, or an absolute path
+    localizer_status_topic: str = "/ndt_localizer/status"  # the localizer nodelet's NdtStatus (per-scan times)
     scenario_name: str = "custom"
 
     def check(self) -> None:

@@ -25,6 +25,7 @@ from grid_puzzle_localization.monitor.stats import summarize
 from grid_puzzle_localization.report.build import (
     MONITOR_CSV,
     MONITOR_JSON,
+    SCAN_TIMES,
     TRAJECTORY,
     RunInfo,
     build_report,
@@ -102,7 +103,9 @@ def start_recorder(cfg: ExperimentConfig, core: RosCore, out: Path, initial_pose
     argv = [
         f"__name:={cfg.roles.recorder.lstrip('/')}",
         f"_output:={(out / TRAJECTORY).resolve()}",
+        f"_scan_times:={(out / SCAN_TIMES).resolve()}",
         f"_initial_pose:={pose}",
+        f"status:={cfg.localizer_status_topic}",
     ]
     recorder = run_node("trajectory_recorder", "trajectory_recorder", argv, core.env, out / "logs" / "recorder.log")
     try:

@@ -3,6 +3,7 @@
 OUT/run.json                    scenario, modes, roles per mode, ground truth path, storage figures
 OUT/<mode>/trajectory.tum       the localizer's odometry (TUM)
 OUT/<mode>/monitor.csv, .json   the resource monitor's samples and summary (with events)
+OUT/<mode>/scan_times.csv       the localizer's per-scan times (optional)
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from pathlib import Path
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation.resources import protocol_processes
+from grid_puzzle_localization.evaluation.scan_times import read_scan_times
 from grid_puzzle_localization.evaluation.summary import ModeRun, summarize_experiment
 from grid_puzzle_localization.evaluation.trajectory import read_tum
 from grid_puzzle_localization.monitor.log import Event, read_csv
@@ -25,6 +27,7 @@ RUN_FILE = "run.json"
 TRAJECTORY = "trajectory.tum"
 MONITOR_CSV = "monitor.csv"
 MONITOR_JSON = "monitor.json"
+SCAN_TIMES = "scan_times.csv"
 
 
 @dataclass
@@ -73,7 +76,8 @@ def load_mode(out_dir: Path, mode: str, roles: dict[str, str]) -> ModeRun:
     log = read_csv(d / MONITOR_CSV)
     if (d / MONITOR_JSON).exists():
         log.events = [Event(**e) for e in read_json(d / MONITOR_JSON).get("events", [])]
-    return ModeRun(mode, read_tum(d / TRAJECTORY), log, roles)
+    scan_times = read_scan_times(d / SCAN_TIMES) if (d / SCAN_TIMES).exists() else None
+    return ModeRun(mode, read_tum(d / TRAJECTORY), log, roles, scan_times)
 
 
 def build_report(out_dir: str | os.PathLike) -> dict:

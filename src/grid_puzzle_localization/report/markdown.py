@@ -148,6 +148,25 @@ def accuracy_table(summary: Mapping) -> list[str]:
     return lines
 
 
+def scan_time_table(summary: Mapping) -> list[str]:
+    """The localizer's time per scan (the paper's Table III), when the run recorded it."""
+    rows = [(mode, m.get("scan_time_ms")) for mode, m in summary["modes"].items()]
+    if not any(t for _, t in rows):
+        return ["No per-scan times were recorded."]
+    fusion = summary["scenario"].get("fusion", "–")
+    lines = [
+        "| mode | fusion | scans | mean [ms] | median [ms] | p95 [ms] |",
+        "|---|---|---:|---:|---:|---:|",
+    ]
+    for mode, t in rows:
+        if t:
+            lines.append(
+                f"| {MODE_TITLES.get(mode, mode)} | {fusion} | {t['scans']} | {_num(t['mean'])} "
+                f"| {_num(t['median'])} | {_num(t['p95'])} |"
+            )
+    return lines
+
+
 def storage_table(summary: Mapping) -> list[str]:
     storage = summary.get("storage")
     if not storage:
@@ -217,6 +236,13 @@ def render_report(summary: Mapping) -> str:
         f"nearest pose of the other within {summary['max_time_diff_s']} s, as evo does. No alignment is applied",
         '(all trajectories are in the map frame). "global map run" is the paper\'s figure: the grid puzzle',
         "trajectory against the global map trajectory.",
+        "",
+        "## Time per scan",
+        "",
+        *scan_time_table(summary),
+        "",
+        "The localizer's own time for each scan (NdtStatus scan_time_ms): preprocessing, the NDT match with any",
+        "hypotheses or search, and the sliding window's update when fusion is on.",
         "",
         "## Storage",
         "",

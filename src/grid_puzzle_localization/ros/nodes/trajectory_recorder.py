@@ -1,6 +1,7 @@
 """Node that records an Odometry topic as a TUM trajectory, written when the node shuts down.
 
-Subscribes: ``odom`` (nav_msgs/Odometry). Parameters: ``~output`` (path of the TUM file).
+Subscribes: ``odom`` (nav_msgs/Odometry) and, when ``~scan_times`` (a CSV path) is set, ``status`` (the
+localizer's NdtStatus, for its per-scan times). Parameters: ``~output`` (path of the TUM file).
 Optionally publishes ``~initial_pose`` (7 numbers x y z qx qy qz qw in ``~frame_id``, default
 ``map``) once and latched on ``initialpose`` (geometry_msgs/PoseWithCovarianceStamped), which is how
 the experiment seeds the localizer and the map provider. Poses whose stamp does not increase (a bag
@@ -14,15 +15,24 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.evaluation.scan_times import write_scan_times
 from grid_puzzle_localization.evaluation.trajectory import make_trajectory, write_tum
+from grid_puzzle_localization.msg import NdtStatus
 
 
 class TrajectoryRecorder:
-    def __init__(self, output: str):
+    def __init__(self, output: str, scan_times: str | None):
         self.output = output
+        self.scan_times_output = scan_times
         self.rows: list[tuple[float, ...]] = []
+        self.scan_times: list[tuple[float, float, float]] = []
         self.dropped = 0
         self.sub = rospy.Subscriber("odom", Odometry, self.on_odom, queue_size=100)
+        if scan_times:
+            self.status_sub = rospy.Subscriber("status", NdtStatus, self.on_status, queue_size=100)
+
+    def on_status(self, msg: NdtStatus) -> None:
+        self.scan_times.append((msg.header.stamp.to_sec(), msg.scan_time_ms, msg.align_time_ms))
 
     def on_odom(self, msg: Odometry) -> None:
         p, q = msg.pose.pose.position, msg.pose.pose.orientation
@@ -36,6 +46,8 @@ class TrajectoryRecorder:
         data = np.array(self.rows, dtype=np.float64).reshape(-1, 8)
         write_tum(self.output, make_trajectory(data[:, 0], data[:, 1:4], data[:, 4:8], source="odom"))
         rospy.loginfo(f"trajectory_recorder: wrote {len(data)} poses to {self.output} (dropped {self.dropped})")
+        if self.scan_times_output:
+            write_scan_times(self.scan_times_output, self.scan_times)
 
 
 def initial_pose_message(values: list[float], frame_id: str) -> PoseWithCovarianceStamped:
@@ -54,7 +66,7 @@ def initial_pose_message(values: list[float], frame_id: str) -> PoseWithCovarian
 def main() -> None:
     rospy.init_node("trajectory_recorder")
     output = rospy.get_param("~output")
-    recorder = TrajectoryRecorder(output)
+    recorder = TrajectoryRecorder(output, rospy.get_param("~scan_times", None))
     initial = rospy.get_param("~initial_pose", None)
     if initial is not None:
         pub = rospy.Publisher("initialpose", PoseWithCovarianceStamped, queue_size=1, latch=True)
