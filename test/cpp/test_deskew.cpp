@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <random>
 
 #include "grid_puzzle_localization/deskew.hpp"
@@ -154,15 +155,22 @@ void spinningScan(const gpl::PointCloud& world, Truth&& truth, double stamp, uns
   }
 }
 
-double worstError(bool deskew) {
-  const gpl::PointCloud world = t::makeWorld();
+// The localizer of these drives: 0.4 m voxels, 30 m range, `world` as its map.
+std::unique_ptr<gpl::Localizer> yardLocalizer(const gpl::PointCloud& world, bool deskew) {
   gpl::LocalizerConfig c;
   c.preprocess.voxel_size = 0.4;
   c.preprocess.max_range = 30.0;
   c.preprocess.deskew = deskew;
-  gpl::Localizer loc(c);
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
+  auto loc = std::make_unique<gpl::Localizer>(c);
+  loc->map().submit(gpl::MapChange::fullCloud(world));
+  loc->map().waitIdle();
+  return loc;
+}
+
+double worstError(bool deskew) {
+  const gpl::PointCloud world = t::makeWorld();
+  const std::unique_ptr<gpl::Localizer> localizer = yardLocalizer(world, deskew);
+  gpl::Localizer& loc = *localizer;
   loc.setInitialPose(yardTruth(0.0));
   gpl::PointCloud scan;
   gpl::PointTimes times;
@@ -200,13 +208,8 @@ Eigen::Isometry3d turningTruth(double time) { return t::poseXYYaw(-5.0, 1.0, 0.3
 // velocity; with a gyro its rotation deskews them (the body-frame rate is the truth's, 3 rad/s about z).
 double worstTurningRotationError(bool gyro) {
   const gpl::PointCloud world = t::makeWorld();
-  gpl::LocalizerConfig c;
-  c.preprocess.voxel_size = 0.4;
-  c.preprocess.max_range = 30.0;
-  c.preprocess.deskew = true;
-  gpl::Localizer loc(c);
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
+  const std::unique_ptr<gpl::Localizer> localizer = yardLocalizer(world, true);
+  gpl::Localizer& loc = *localizer;
   loc.setInitialPose(turningTruth(0.0));
   if (gyro)
     for (double t = -0.1; t < 0.5; t += 0.005) loc.addGyro(t, Eigen::Vector3d(0.0, 0.0, 3.0));
