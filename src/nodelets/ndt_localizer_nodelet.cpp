@@ -1,5 +1,7 @@
 // NDT localizer nodelet: PointCloud2 -> core Localizer -> Odometry, TF and status. All state and maths
-// live in the core (localizer.hpp); this file converts messages, looks up frames and publishes.
+// live in the core (localizer.hpp); this file wires topics, services and frames to it. Its parts are files of
+// their own here: parameters, message conversions, the scan slot, tile delta input, TF output, the throttle of
+// fusion warnings and the timer of the automatic global search.
 #include <geometry_msgs/PoseWithCovarianceStamped.h>
 #include <nav_msgs/Odometry.h>
 #include <nodelet/nodelet.h>
