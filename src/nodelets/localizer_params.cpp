@@ -51,14 +51,27 @@ class CheckedLoader {
   std::string log_name_;
 };
 
+// Reads the word parameter `name` into `field` through `parse` (nullopt for a word it does not know); an unknown
+// word stops the start-up with the parameter, its value and the `allowed` words.
+template <class T>
+void loadChoice(const ros::NodeHandle& pnh, const std::string& name, std::optional<T> (*parse)(const std::string&),
+                const char* allowed, T& field) {
+  std::string value;
+  if (!pnh.getParam(name, value)) return;
+  const std::optional<T> parsed = parse(value);
+  if (!parsed) throw std::invalid_argument("~" + name + " '" + value + "' is unknown; use " + allowed);
+  field = *parsed;
+}
+
+std::optional<NdtSearchMethod> searchMethod(const std::string& text) {
+  NdtSearchMethod method;
+  if (!parseSearchMethod(text, &method)) return std::nullopt;
+  return method;
+}
+
 // fusion/mode first: the window's parameters are checked only when it runs.
 void loadFusion(const ros::NodeHandle& pnh, CheckedLoader& load, FusionConfig& f, LocalizerRosParams& p) {
-  std::string mode;
-  if (pnh.getParam("fusion/mode", mode)) {
-    const std::optional<FusionMode> parsed = parseFusionMode(mode);
-    if (!parsed) throw std::invalid_argument("~fusion/mode '" + mode + "' is unknown; use none or sliding_window");
-    f.mode = *parsed;
-  }
+  loadChoice(pnh, "fusion/mode", parseFusionMode, "none or sliding_window", f.mode);
   load("fusion/ndt_covariance_scale", f.ndt_covariance_scale);
   SlidingWindowConfig& w = f.window;
   load("fusion/window/gravity", w.gravity);
@@ -122,10 +135,7 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
   load("ndt/max_iterations", c.ndt.max_iterations);
   load("ndt/outlier_ratio", c.ndt.outlier_ratio);
   load("ndt/line_search", c.ndt.line_search);
-  std::string search;
-  if (pnh.getParam("ndt/search_method", search) && !parseSearchMethod(search, &c.ndt.search))
-    throw std::invalid_argument("~ndt/search_method '" + search +
-                                "' is unknown; use DIRECT1, DIRECT7, DIRECT27 or RADIUS");
+  loadChoice(pnh, "ndt/search_method", searchMethod, "DIRECT1, DIRECT7, DIRECT27 or RADIUS", c.ndt.search);
   // The branch-and-bound search (GlobalLocalizationConfig; its NDT is ndt/* above but for its own epsilon).
   GlobalLocalizationConfig& gc = c.global;
   load("global_localization/resolution", gc.resolution);

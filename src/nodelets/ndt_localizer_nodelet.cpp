@@ -1,5 +1,7 @@
 // NDT localizer nodelet: PointCloud2 -> core Localizer -> Odometry, TF and status. All state and maths
-// live in the core (localizer.hpp); this file converts messages, looks up frames and publishes.
+// live in the core (localizer.hpp); this file wires topics, services and frames to it. Its parts are files of
+// their own here: parameters, message conversions, the scan slot, tile delta input, TF output, the throttle of
+// fusion warnings and the timer of the automatic global search.
 #include <geometry_msgs/PoseWithCovarianceStamped.h>
 #include <nav_msgs/Odometry.h>
 #include <nodelet/nodelet.h>
@@ -7,40 +9,32 @@
 #include <sensor_msgs/Imu.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <std_srvs/Trigger.h>
-#include <sys/stat.h>
 #include <tf2_eigen/tf2_eigen.h>
 #include <tf2_ros/buffer.h>
-#include <tf2_ros/transform_broadcaster.h>
 #include <tf2_ros/transform_listener.h>
 
 #include <atomic>
-#include <cctype>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <pluginlib/class_list_macros.hpp>
 
+#include "global_search_timer.hpp"
 #include "grid_puzzle_localization/GlobalLocalize.h"
 #include "grid_puzzle_localization/TileDelta.h"
 #include "grid_puzzle_localization/localizer.hpp"
 #include "grid_puzzle_localization/rpy.hpp"
-#include "grid_puzzle_localization/tile_delta_sequence.hpp"
 #include "imu_msg.hpp"
+#include "latest_scan_slot.hpp"
 #include "localizer_params.hpp"
+#include "map_tf_broadcaster.hpp"
 #include "ndt_status_msg.hpp"
+#include "odometry_msg.hpp"
 #include "point_cloud_msg.hpp"
+#include "tile_delta_input.hpp"
+#include "warning_throttle.hpp"
 
 namespace grid_puzzle_localization {
-
-namespace {
-
-bool isDirectory(const std::string& path) {
-  struct stat st {};
-  return ::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode);
-}
-
-}  // namespace
 
 class NdtLocalizerNodelet : public nodelet::Nodelet {
  private:
@@ -65,7 +59,9 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
 
     tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
     tf_listener_ = std::make_unique<tf2_ros::TransformListener>(*tf_buffer_, nh);
-    tf_broadcaster_ = std::make_unique<tf2_ros::TransformBroadcaster>();
+    map_tf_ = std::make_unique<MapTfBroadcaster>(*tf_buffer_, params_.map_frame, params_.odom_frame, params_.base_frame,
+                                                 getName());
+    global_search_timer_ = GlobalSearchTimer(params_.global_localization.auto_start_timeout);
     odom_pub_ = nh.advertise<nav_msgs::Odometry>("odom", 10);
     status_pub_ = pnh.advertise<NdtStatus>("status", 10);
     if (params_.publish_aligned_points) aligned_pub_ = nh.advertise<sensor_msgs::PointCloud2>("aligned_points", 2);
@@ -74,7 +70,8 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       map_sub_ = mt_nh.subscribe("map_cloud", 1, &NdtLocalizerNodelet::onMapCloud, this);
     } else if (params_.map_source == "tiles") {
       map_sub_ = mt_nh.subscribe("tile_delta", 100, &NdtLocalizerNodelet::onTileDelta, this);
-      resend_client_ = mt_nh.serviceClient<std_srvs::Trigger>(params_.resend_service);
+      tile_input_ = std::make_unique<TileDeltaInput>(mt_nh.serviceClient<std_srvs::Trigger>(params_.resend_service),
+                                                     params_.core.ndt.resolution, getName());
     } else {
       localizer_->map().submit(MapChange::pcdFile(params_.pcd_path));
     }
@@ -106,57 +103,8 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
 
   void onTileDelta(const TileDelta::ConstPtr& msg) {
     if (!checkMapFrame(msg->header.frame_id, "tile_delta")) return;
-    const bool by_reference = !msg->tile_dir.empty();
-    if (!by_reference && msg->added_ids.size() != msg->added_clouds.size()) {
-      NODELET_ERROR("tile_delta revision %u: %zu added ids but %zu clouds; the provider must send one cloud per id",
-                    msg->revision, msg->added_ids.size(), msg->added_clouds.size());
-      return;
-    }
-    switch (tile_sequence_.accept(msg->revision, msg->reset)) {
-      case TileDeltaSequence::Verdict::kIgnore:
-        return;
-      case TileDeltaSequence::Verdict::kRequestResend: {
-        NODELET_WARN("tile_delta revision %u does not follow the last one applied: asking %s for the whole window",
-                     msg->revision, resend_client_.getService().c_str());
-        std_srvs::Trigger srv;
-        if (!resend_client_.call(srv) || !srv.response.success) {
-          tile_sequence_.resendFailed();
-          NODELET_ERROR_THROTTLE(5.0, "service %s failed (%s); is the tile provider running?",
-                                 resend_client_.getService().c_str(), srv.response.message.c_str());
-        }
-        return;
-      }
-      case TileDeltaSequence::Verdict::kApply:
-        break;
-    }
-    if (voxelsPerTileSide(msg->grid_size, params_.core.ndt.resolution) == 0)
-      NODELET_WARN_ONCE(
-          "tile side %g m is not a whole multiple of ~ndt/resolution %g m: voxels straddle tiles, so each tile's "
-          "statistics are kept as well (more memory per voxel); use a resolution that divides the tile side",
-          msg->grid_size, params_.core.ndt.resolution);
-    if (by_reference && !isDirectory(msg->tile_dir)) {
-      // Checked here, not only by the map worker, so the deltas missed meanwhile are made up by a resend.
-      tile_sequence_.notApplied();
-      NODELET_ERROR_THROTTLE(
-          5.0,
-          "tile_delta revision %u: tile directory '%s' does not exist (removed or unmounted?); "
-          "matching on the %zu tiles loaded, the whole window is asked for again with the next delta",
-          msg->revision, msg->tile_dir.c_str(), localizer_->map().stats().tiles);
-      return;
-    }
-    if (by_reference) {  // the map worker reads the files
-      localizer_->map().submit(MapChange::tileFiles(
-          msg->grid_size,
-          {msg->tile_dir, msg->index_revision, msg->reset != 0, msg->added_ids, msg->removed_ids, msg->prefetch_ids}));
-      return;
-    }
-    try {
-      std::vector<TileCloud> added(msg->added_ids.size());
-      for (std::size_t i = 0; i < added.size(); ++i) added[i] = {msg->added_ids[i], fromMsg(msg->added_clouds[i])};
-      localizer_->map().submit(MapChange::tiles(msg->reset, msg->grid_size, std::move(added), msg->removed_ids));
-    } catch (const std::invalid_argument& e) {
-      NODELET_ERROR("tile_delta revision %u: %s", msg->revision, e.what());
-    }
+    std::optional<MapChange> change = tile_input_->accept(*msg, localizer_->map());
+    if (change) localizer_->map().submit(std::move(*change));
   }
 
   bool checkMapFrame(const std::string& frame, const char* topic) {
@@ -208,35 +156,20 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
 
   // Each kind of fusion warning (its text without the numbers) at most once per 5 s.
   void logFusionWarnings() {
-    const ros::WallTime now = ros::WallTime::now();
-    for (const std::string& warning : localizer_->fusion().takeWarnings()) {
-      std::string kind;
-      for (char ch : warning)
-        if (!std::isdigit(static_cast<unsigned char>(ch))) kind += ch;
-      ros::WallTime& last = fusion_warned_[kind];
-      if (!last.isZero() && (now - last).toSec() < 5.0) continue;
-      last = now;
-      NODELET_WARN("fusion: %s", warning.c_str());
-    }
+    const double now = ros::WallTime::now().toSec();
+    for (const std::string& warning : localizer_->fusion().takeWarnings())
+      if (fusion_warnings_.pass(warning, now)) NODELET_WARN("fusion: %s", warning.c_str());
   }
 
   void onPointsArrived(const sensor_msgs::PointCloud2::ConstPtr& msg) {
-    {
-      std::lock_guard<std::mutex> lock(pending_mutex_);
-      if (pending_scan_) ++scans_dropped_;
-      pending_scan_ = msg;
-    }
+    scan_slot_.put(msg);
     getNodeHandle().getCallbackQueue()->addCallback(boost::make_shared<TakeScan>(this));
   }
 
   struct TakeScan : ros::CallbackInterface {
     explicit TakeScan(NdtLocalizerNodelet* n) : nodelet(n) {}
     CallResult call() override {
-      sensor_msgs::PointCloud2::ConstPtr msg;
-      {
-        std::lock_guard<std::mutex> lock(nodelet->pending_mutex_);
-        msg.swap(nodelet->pending_scan_);
-      }
+      const sensor_msgs::PointCloud2::ConstPtr msg = nodelet->scan_slot_.take();
       if (msg) nodelet->onPoints(msg);  // else a newer scan's callback already took it
       return Success;
     }
@@ -287,22 +220,19 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     publish(out, msg->header);
   }
 
-  // Starts a global search once when no initial pose came within global_localization/auto_start_timeout.
+  // Starts a global search when no initial pose came within global_localization/auto_start_timeout.
   void maybeStartGlobalLocalization(const ros::Time& stamp) {
-    const GlobalLocalizationParams& g = params_.global_localization;
-    if (g.auto_start_timeout <= 0.0) return;
-    if (waiting_since_.isZero()) waiting_since_ = stamp;
-    if ((stamp - waiting_since_).toSec() < g.auto_start_timeout) return;
+    if (!global_search_timer_.due(stamp.toSec())) return;
     GlobalLocalize::Request req;
     GlobalLocalize::Response res;
-    const std::optional<Eigen::Vector2d> centre = hint_ ? hint_ : g.center;
+    const std::optional<Eigen::Vector2d> centre = hint_ ? hint_ : params_.global_localization.center;
     if (centre) {
       req.use_center = true;
       req.center_x = centre->x();
       req.center_y = centre->y();
     }
     onGlobalLocalize(req, res);
-    if (!res.success) waiting_since_ = stamp;  // try again after another timeout
+    if (!res.success) global_search_timer_.failed(stamp.toSec());  // try again after another timeout
   }
 
   void onHint(const geometry_msgs::PoseWithCovarianceStamped::ConstPtr& msg) {
@@ -378,10 +308,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     std_msgs::Header status_header = scan_header;
     status_header.frame_id = params_.map_frame;
     NdtStatus status = toStatusMsg(out, status_header, localizer_->map().stats().update_ms, params_.map_source);
-    {
-      std::lock_guard<std::mutex> lock(pending_mutex_);
-      status.scans_dropped = scans_dropped_;
-    }
+    status.scans_dropped = scan_slot_.dropped();
     if (status.scans_dropped > warned_drops_) {
       NODELET_WARN_THROTTLE(5.0, "%lu scans dropped so far: scans arrive faster than they are matched",
                             static_cast<unsigned long>(status.scans_dropped));
@@ -389,19 +316,8 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     }
     status_pub_.publish(status);
     if (!out.publish) return;  // lost for longer than lost/max_coast_time: no pose rather than a wrong one
-    nav_msgs::Odometry odom;
-    odom.header.stamp = scan_header.stamp;
-    odom.header.frame_id = params_.map_frame;
-    odom.child_frame_id = params_.base_frame;
-    odom.pose.pose = tf2::toMsg(out.pose);
-    odom.twist.twist = tf2::toMsg(Eigen::Matrix<double, 6, 1>(out.twist));
-    for (int r = 0; r < 6; ++r)
-      for (int c = 0; c < 6; ++c) {
-        odom.pose.covariance[6 * r + c] = out.covariance(r, c);
-        odom.twist.covariance[6 * r + c] = out.twist_covariance(r, c);
-      }
-    odom_pub_.publish(odom);
-    if (params_.publish_tf) publishTf(out.pose, scan_header.stamp);
+    odom_pub_.publish(toOdometryMsg(out, scan_header.stamp, params_.map_frame, params_.base_frame));
+    if (params_.publish_tf) map_tf_->send(out.pose, scan_header.stamp);
 
     if (params_.publish_aligned_points && aligned_pub_.getNumSubscribers() > 0) {
       std_msgs::Header h = scan_header;
@@ -410,56 +326,25 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     }
   }
 
-  // map -> odom once someone publishes odom -> base_link (then for good), map -> base_link otherwise.
-  void publishTf(const Eigen::Isometry3d& map_T_base, const ros::Time& stamp) {
-    geometry_msgs::TransformStamped t;
-    t.header.stamp = stamp;
-    t.header.frame_id = params_.map_frame;
-    if (!params_.odom_frame.empty() && !odom_published_by_others_)
-      odom_published_by_others_ = tf_buffer_->canTransform(params_.odom_frame, params_.base_frame, ros::Time(0));
-    if (!odom_published_by_others_) {
-      t.child_frame_id = params_.base_frame;
-      t.transform = tf2::eigenToTransform(map_T_base).transform;
-      tf_broadcaster_->sendTransform(t);
-      return;
-    }
-    try {
-      const Eigen::Isometry3d odom_T_base =
-          tf2::transformToEigen(tf_buffer_->lookupTransform(params_.odom_frame, params_.base_frame, stamp));
-      t.child_frame_id = params_.odom_frame;
-      t.transform = tf2::eigenToTransform(map_T_base * odom_T_base.inverse()).transform;
-      tf_broadcaster_->sendTransform(t);
-    } catch (const tf2::TransformException& e) {
-      NODELET_WARN_THROTTLE(5.0, "no '%s' -> '%s' at the scan time (%s); map -> %s not published for this scan",
-                            params_.odom_frame.c_str(), params_.base_frame.c_str(), e.what(),
-                            params_.odom_frame.c_str());
-    }
-  }
-
   LocalizerRosParams params_;
   std::unique_ptr<Localizer> localizer_;
   std::unique_ptr<tf2_ros::Buffer> tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
-  std::unique_ptr<tf2_ros::TransformBroadcaster> tf_broadcaster_;
+  std::unique_ptr<MapTfBroadcaster> map_tf_;               // scan thread only
   std::map<std::string, Eigen::Isometry3d> static_cache_;  // scan thread only
-  TileDeltaSequence tile_sequence_;                        // tile_delta callback only (never concurrent)
+  std::unique_ptr<TileDeltaInput> tile_input_;             // tiles mode; tile_delta callback only (never concurrent)
   std::optional<LocalizerState> last_state_;               // for logging each state change once
-  bool odom_published_by_others_ = false;
-  std::atomic<int> map_clouds_{0};                      // map_cloud messages taken (multi-threaded queue)
-  int map_clouds_seen_ = 0;                             // scan thread: map_clouds_ at the last map swap
-  std::map<std::string, ros::WallTime> fusion_warned_;  // scan thread: last log time of each kind of warning
-  ros::Time waiting_since_;                             // first scan without an initial pose (automatic start)
-  std::optional<Eigen::Vector2d> hint_;                 // last initialpose_hint (map frame)
-
-  std::mutex pending_mutex_;                         // guards the two below (points arrive on the MT queue)
-  sensor_msgs::PointCloud2::ConstPtr pending_scan_;  // the newest scan not yet taken by the scan thread
-  std::uint64_t scans_dropped_ = 0;                  // scans replaced in the slot before they were taken
-  std::uint64_t warned_drops_ = 0;                   // scan thread only
+  std::atomic<int> map_clouds_{0};                         // map_cloud messages taken (multi-threaded queue)
+  int map_clouds_seen_ = 0;                                // scan thread: map_clouds_ at the last map swap
+  WarningThrottle fusion_warnings_{5.0};                   // scan thread
+  GlobalSearchTimer global_search_timer_{0.0};             // scan thread; set from the parameters in onInit
+  std::optional<Eigen::Vector2d> hint_;                    // last initialpose_hint (map frame)
+  LatestScanSlot<sensor_msgs::PointCloud2::ConstPtr> scan_slot_;  // points (MT queue) -> scan thread
+  std::uint64_t warned_drops_ = 0;                                // scan thread only
 
   ros::Publisher odom_pub_, status_pub_, aligned_pub_;
   ros::Subscriber points_sub_, initial_pose_sub_, imu_sub_, odom_in_sub_, map_sub_, hint_sub_;
   ros::ServiceServer global_srv_;
-  ros::ServiceClient resend_client_;
 };
 
 }  // namespace grid_puzzle_localization

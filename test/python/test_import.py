@@ -73,6 +73,15 @@ def test_poses_that_are_not_rigid_transforms_are_refused(tmp_path, change, messa
         read_poses(write_kitti(tmp_path / "p.txt", poses), "kitti")
 
 
+def test_a_line_of_the_wrong_width_names_its_format(tmp_path):
+    (tmp_path / "p.tum").write_text("# t x y z qx qy qz qw\n1 0 0 0 0 0 0 1\n2 0 0\n")
+    expected = r"p\.tum:3: a tum line has 8 numbers \(t tx ty tz qx qy qz qw\), found 3"
+    with pytest.raises(UserError, match=expected):
+        read_poses(tmp_path / "p.tum", "tum")
+    with pytest.raises(UserError, match=expected):
+        read_tum(tmp_path / "p.tum")
+
+
 # ---- which scans are mapped and played ----
 
 

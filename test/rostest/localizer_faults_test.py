@@ -32,14 +32,13 @@ from pathlib import Path
 import numpy as np
 import rospy
 import rostest
+from fixtures import localizer_replay as replay
 from fixtures import synthetic_scene as ss
 from fixtures.synthetic_bag import write_drive_bag
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from grid_puzzle_localization.msg import NdtStatus, TileDelta
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Log
-from scipy.spatial.transform import Rotation
-from std_msgs.msg import Header
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "python"))
 from fault_report import record
@@ -160,17 +159,8 @@ class LocalizerFaultsTest(unittest.TestCase):
     def run_drive(cls) -> None:
         # Not latched: a respawned localizer must not take the start pose again.
         pose_pub = rospy.Publisher("/initialpose", PoseWithCovarianceStamped, queue_size=1)
-        deadline = time.monotonic() + WAIT
-        while pose_pub.get_num_connections() < 2 and time.monotonic() < deadline:  # the localizer and the provider
-            time.sleep(0.2)
-        if pose_pub.get_num_connections() < 2:
-            raise RuntimeError(f"localizer and provider not subscribed to /initialpose within {WAIT} s; see the log")
-        msg = PoseWithCovarianceStamped(header=Header(frame_id="map"))
-        start = cls.drive.pose(0.0)
-        p, o = msg.pose.pose.position, msg.pose.pose.orientation
-        p.x, p.y, p.z = start[:3, 3]
-        o.x, o.y, o.z, o.w = Rotation.from_matrix(start[:3, :3]).as_quat()
-        pose_pub.publish(msg)
+        replay.wait_until_subscribed([pose_pub], "the localizer and the provider", connections=2)
+        pose_pub.publish(replay.initial_pose_msg(cls.drive.pose(0.0)))
         time.sleep(4.0)  # the provider's first window reaches the localizer, which reads the tiles
         cls.pids = {
             "provider": node_pid("/grid_puzzle_map_provider", NAME, WAIT),

@@ -5,24 +5,15 @@ One synthetic drive along the street with an 8 s gap in the scans, played with `
 localizers: one started at the true pose (the gap), one started 30 m and 90 deg off, one with no initial pose
 that searches by itself around a coarse centre."""
 
-import subprocess
-import tempfile
-import time
-import unittest
-from pathlib import Path
-
 import numpy as np
 import rospy
 import rostest
+from fixtures import localizer_replay as replay
 from fixtures import synthetic_scene as ss
-from fixtures.synthetic_bag import write_drive_bag, xyz_cloud
 from grid_puzzle_localization.msg import NdtStatus
 from nav_msgs.msg import Odometry
 from scipy.spatial.transform import Rotation
-from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import Header
 
-START = 1000.0  # bag time of the first scan [s]
 GAP = (4.0, 12.0)  # no scans in between [s from the start]
 MAX_COAST_TIME = 2.0  # lost/max_coast_time, the core's default
 NAMES = ("gap", "offset", "global")
@@ -42,38 +33,23 @@ class Track:
         m = np.eye(4)
         m[:3, :3] = Rotation.from_quat([o.x, o.y, o.z, o.w]).as_matrix()
         m[:3, 3] = [p.x, p.y, p.z]
-        self.poses[round(msg.header.stamp.to_sec() - START, 3)] = m
+        self.poses[round(msg.header.stamp.to_sec() - replay.START, 3)] = m
 
     def _on_status(self, msg: NdtStatus) -> None:
-        self.statuses[round(msg.header.stamp.to_sec() - START, 3)] = msg
+        self.statuses[round(msg.header.stamp.to_sec() - replay.START, 3)] = msg
 
 
-class LocalizerRecoveryTest(unittest.TestCase):
+class LocalizerRecoveryTest(replay.DriveReplayTest):
     @classmethod
     def setUpClass(cls) -> None:
-        rospy.init_node("localizer_recovery_test")
-        scene = ss.make_scene()
-        cls.drive = ss.Drive(duration=16.0, x0=-8.0)
-        stamps = cls.drive.stamps[(cls.drive.stamps < GAP[0]) | (cls.drive.stamps >= GAP[1])]
-        object.__setattr__(cls.drive, "stamps", stamps)  # the gap: scans dropped, the motion goes on
-        cls.tmp = tempfile.TemporaryDirectory()
-        bag = Path(cls.tmp.name) / "drive.bag"
-        write_drive_bag(bag, scene, cls.drive, start=START)
+        drive = ss.Drive(duration=16.0, x0=-8.0)
+        stamps = drive.stamps[(drive.stamps < GAP[0]) | (drive.stamps >= GAP[1])]
+        object.__setattr__(drive, "stamps", stamps)  # the gap: scans dropped, the motion goes on
+        bag = cls.write_drive("localizer_recovery_test", drive)
         cls.tracks = {name: Track(name) for name in NAMES}
-        map_pub = rospy.Publisher("/map_cloud", PointCloud2, queue_size=1, latch=True)
-        map_pub.publish(xyz_cloud(ss.sample_map(scene), Header(frame_id="map")))
-        deadline = time.monotonic() + 60.0
-        while time.monotonic() < deadline and not map_pub.get_num_connections():
-            time.sleep(0.2)
-        if not map_pub.get_num_connections():
-            raise RuntimeError("the localizers did not subscribe to /map_cloud within 60 s; see the manager's log")
-        time.sleep(3.0)  # let the map be built in the background
-        subprocess.run(["rosbag", "play", "--clock", "-q", "-d", "2", "-r", "0.25", str(bag)], check=True, timeout=400)
-        time.sleep(3.0)
-
-    @classmethod
-    def tearDownClass(cls) -> None:
-        cls.tmp.cleanup()
+        map_pub = replay.publish_map(ss.sample_map(cls.scene))
+        replay.wait_until_subscribed([map_pub], "the localizers")
+        replay.play_bag(bag, rate=0.25, timeout=400, linger=3.0)
 
     def error(self, t: float, m: np.ndarray) -> float:
         return float(np.linalg.norm(m[:3, 3] - self.drive.pose(t)[:3, 3]))

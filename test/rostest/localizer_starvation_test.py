@@ -14,26 +14,22 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-import tempfile
 import time
-import unittest
 from pathlib import Path
 
 import numpy as np
 import rospy
 import rostest
+from fixtures import localizer_replay as replay
 from fixtures import synthetic_scene as ss
-from fixtures.synthetic_bag import write_drive_bag, xyz_cloud
 from grid_puzzle_localization.msg import NdtStatus
 from nav_msgs.msg import Odometry
-from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import Header
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "python"))
 from fault_report import record
 from ros_process import node_pid
 
-START = 1000.0  # bag time of the first scan [s]
+START = replay.START
 DURATION = 12.0  # [s] of drive
 LOAD = (3.0, 7.0)  # [s from the start, bag time] busy processes running
 BUSY_PER_CORE = 2
@@ -51,27 +47,16 @@ def set_session_niceness(pid: int, niceness: int) -> None:
         autogroup.write_text(str(niceness))
 
 
-class LocalizerStarvationTest(unittest.TestCase):
+class LocalizerStarvationTest(replay.DriveReplayTest):
     @classmethod
     def setUpClass(cls) -> None:
-        rospy.init_node("localizer_starvation_test")
-        scene = ss.make_scene()
-        cls.drive = ss.Drive(duration=DURATION, x0=-8.0)
-        cls.tmp = tempfile.TemporaryDirectory()
-        bag = Path(cls.tmp.name) / "drive.bag"
-        write_drive_bag(bag, scene, cls.drive, start=START)
+        bag = cls.write_drive("localizer_starvation_test", ss.Drive(duration=DURATION, x0=-8.0))
         cls.poses: dict[float, np.ndarray] = {}
         cls.statuses: list[tuple[float, float, NdtStatus]] = []  # (bag time received, stamp, status), from START
         rospy.Subscriber("/odom", Odometry, cls._on_odom, queue_size=100)
         rospy.Subscriber("/ndt_localizer/status", NdtStatus, cls._on_status, queue_size=100)
-        map_pub = rospy.Publisher("/map_cloud", PointCloud2, queue_size=1, latch=True)
-        map_pub.publish(xyz_cloud(ss.sample_map(scene), Header(frame_id="map")))
-        deadline = time.monotonic() + WAIT
-        while time.monotonic() < deadline and not map_pub.get_num_connections():
-            time.sleep(0.2)
-        if not map_pub.get_num_connections():
-            raise RuntimeError(f"the localizer did not subscribe to /map_cloud within {WAIT} s; see the manager's log")
-        time.sleep(3.0)  # let the map be built in the background
+        replay.wait_until_subscribed([replay.publish_map(ss.sample_map(cls.scene))], "the localizer")
+        time.sleep(replay.MAP_BUILD)
         manager = node_pid("/manager", "/localizer_starvation_test", WAIT)
         play = subprocess.Popen(["rosbag", "play", "--clock", "-q", "-d", "2", str(bag)])
         load: list[subprocess.Popen] = []
@@ -103,10 +88,6 @@ class LocalizerStarvationTest(unittest.TestCase):
     @classmethod
     def _on_status(cls, msg: NdtStatus) -> None:
         cls.statuses.append((rospy.Time.now().to_sec() - START, msg.header.stamp.to_sec() - START, msg))
-
-    @classmethod
-    def tearDownClass(cls) -> None:
-        cls.tmp.cleanup()
 
     def dropped_by(self, t: float) -> int:
         """status.scans_dropped of the last status received before bag time ``t``."""

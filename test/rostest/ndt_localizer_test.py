@@ -8,29 +8,23 @@ replays the bag with `rosbag play --clock` and compares the trajectories."""
 
 from __future__ import annotations
 
-import subprocess
-import tempfile
 import threading
-import time
-import unittest
 from pathlib import Path
 
 import numpy as np
 import rospy
 import rostest
+from fixtures import localizer_replay as replay
 from fixtures import synthetic_scene as ss
-from fixtures.odometry_track import OdometryTrack, angle_between
-from fixtures.synthetic_bag import write_drive_bag, xyz_cloud
+from fixtures.odometry_track import OdometryTrack
 from fixtures.synthetic_tiles import write_map_tiles
-from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+from geometry_msgs.msg import PoseStamped
 from grid_puzzle_localization.msg import NdtStatus, TileDelta
-from scipy.spatial.transform import Rotation
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger, TriggerResponse
 
 from grid_puzzle_localization.tiles import grid
 
-START = 1000.0  # bag time of the first scan [s]
 TILE = 10.0  # tile side [m]
 WINDOW = 7  # tiles on each side of the vehicle's tile
 OFFSET = ss.pose_matrix(np.array([0.8, 0.6, 0.0]), np.deg2rad(5.0))  # 1 m, 5 deg
@@ -92,64 +86,26 @@ class TileDeltaPublisher:
             self.pub.publish(msg)
 
 
-class NdtLocalizerTest(unittest.TestCase):
+class NdtLocalizerTest(replay.DriveReplayTest):
     @classmethod
     def setUpClass(cls) -> None:
-        rospy.init_node("ndt_localizer_test")
-        cls.scene = ss.make_scene()
-        cls.drive = ss.Drive(duration=5.0, x0=-8.0)
-        cls.tmp = tempfile.TemporaryDirectory()
-        bag = Path(cls.tmp.name) / "drive.bag"
-        write_drive_bag(bag, cls.scene, cls.drive, start=START)
+        bag = cls.write_drive("ndt_localizer_test", ss.Drive(duration=5.0, x0=-8.0))
         map_points = ss.sample_map(cls.scene)
         cls.tracks = {name: OdometryTrack(f"/{name}/odom") for name in ("cloud", "tiles", "offset")}
         cls.statuses: list[NdtStatus] = []
         rospy.Subscriber("/tiles/ndt_localizer/status", NdtStatus, cls.statuses.append)
         cls.tiles = TileDeltaPublisher(map_points, Path(cls.tmp.name) / "tiles")
-        map_pub = rospy.Publisher("/map_cloud", type(xyz_cloud(map_points[:1], Header())), queue_size=1, latch=True)
-        map_pub.publish(xyz_cloud(map_points, Header(frame_id="map")))
-        pose_pub = rospy.Publisher("/offset/initialpose", PoseWithCovarianceStamped, queue_size=1, latch=True)
-        start = OFFSET @ cls.drive.pose(0.0)
-        init = PoseWithCovarianceStamped(header=Header(frame_id="map"))
-        init.pose.pose.position.x, init.pose.pose.position.y = start[0, 3], start[1, 3]
-        q = Rotation.from_matrix(start[:3, :3]).as_quat()
-        o = init.pose.pose.orientation
-        o.x, o.y, o.z, o.w = q
-        pose_pub.publish(init)
+        map_pub = replay.publish_map(map_points)
+        pose_pub = replay.publish_initial_pose("/offset/initialpose", OFFSET @ cls.drive.pose(0.0))
         truth_sub = rospy.Subscriber(
             "/ground_truth", PoseStamped, lambda m: cls.tiles.follow(m.pose.position.x, m.pose.position.y)
         )
         # Every localizer is loaded and subscribed before the bag starts.
-        deadline = time.monotonic() + 60.0
-
-        def connected() -> bool:  # one connection per topic: the localizers share the manager's process
-            return all(p.get_num_connections() for p in (map_pub, pose_pub, cls.tiles.pub))
-
-        while time.monotonic() < deadline and not connected():
-            time.sleep(0.2)
-        if not connected():
-            counts = {p.resolved_name: p.get_num_connections() for p in (map_pub, pose_pub, cls.tiles.pub)}
-            raise RuntimeError(f"the three localizers did not subscribe within 60 s ({counts}); see the manager's log")
+        replay.wait_until_subscribed([map_pub, pose_pub, cls.tiles.pub], "the three localizers")
         first = cls.drive.pose(0.0)
-        cls.tiles.follow(first[0, 3], first[1, 3])
-        time.sleep(3.0)  # let the map and the first window be built in the background
-        subprocess.run(["rosbag", "play", "--clock", "-q", "-d", "2", "-r", "0.25", str(bag)], check=True, timeout=300)
-        time.sleep(2.0)
+        cls.tiles.follow(first[0, 3], first[1, 3])  # the first window, built with the map before the bag
+        replay.play_bag(bag, rate=0.25, timeout=300)
         truth_sub.unregister()
-
-    @classmethod
-    def tearDownClass(cls) -> None:
-        cls.tmp.cleanup()
-
-    def truth(self, stamp: float) -> np.ndarray:
-        return self.drive.pose(stamp - START)
-
-    def worst(self, poses: dict, reference) -> tuple[float, str]:
-        """Largest translation error against ``reference(stamp)`` and a description of where it is."""
-        errors = {t: float(np.linalg.norm(m[:3, 3] - reference(t)[:3, 3])) for t, m in poses.items()}
-        t = max(errors, key=errors.get)
-        where = f"at t = {t - START:.1f} s: {np.round(poses[t][:3, 3], 3)} vs {np.round(reference(t)[:3, 3], 3)}"
-        return errors[t], where
 
     def assert_most_scans(self, poses: dict) -> None:
         self.assertGreaterEqual(len(poses), 0.9 * len(self.drive.stamps), f"only {len(poses)} poses came out")
@@ -157,18 +113,14 @@ class NdtLocalizerTest(unittest.TestCase):
     def test_cloud_mode_follows_ground_truth_within_5cm(self) -> None:
         poses = self.tracks["cloud"].poses
         self.assert_most_scans(poses)
-        error, where = self.worst(poses, self.truth)
-        self.assertLess(error, 0.05, f"worst translation error {error:.3f} m {where}")
-        self.assertLess(max(angle_between(m, self.truth(t)) for t, m in poses.items()), np.deg2rad(0.5))
+        self.assert_within(poses, 0.05, np.deg2rad(0.5))
 
     def test_recovers_from_1m_5deg_initial_offset(self) -> None:
         poses = self.tracks["offset"].poses
         self.assert_most_scans(poses)
-        late = {t: m for t, m in poses.items() if t >= START + 1.0}
+        late = {t: m for t, m in poses.items() if t >= replay.START + 1.0}
         self.assertTrue(late)
-        error, where = self.worst(late, self.truth)
-        self.assertLess(error, 0.05, f"worst translation error after 1 s {error:.3f} m {where}")
-        self.assertLess(max(angle_between(m, self.truth(t)) for t, m in late.items()), np.deg2rad(0.5))
+        self.assert_within(late, 0.05, np.deg2rad(0.5))
 
     def test_tiles_mode_matches_cloud_mode_within_1cm(self) -> None:
         cloud, tiles = self.tracks["cloud"].poses, self.tracks["tiles"].poses

@@ -1,7 +1,7 @@
 """Trajectories as arrays and the TUM file format.
 
 TUM: one pose per line, ``timestamp tx ty tz qx qy qz qw`` (seconds; metres; unit quaternion, scalar
-last), separated by spaces; lines starting with ``#`` are comments."""
+last), separated by spaces (commas are read too); lines starting with ``#`` are comments."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.recordings.poses import read_rows
 from grid_puzzle_localization.util.atomic import atomic_write
 from grid_puzzle_localization.util.iteration import zip_equal
 
@@ -60,25 +61,8 @@ def make_trajectory(t, xyz, quat, source: str = "trajectory") -> Trajectory:
 
 def read_tum(path: str | os.PathLike) -> Trajectory:
     """Reads a TUM trajectory file; raises UserError naming the file and line on bad input."""
-    rows = []
-    try:
-        with open(path) as f:
-            for line_no, line in enumerate(f, 1):
-                text = line.strip()
-                if not text or text.startswith("#"):
-                    continue
-                fields = text.split()
-                if len(fields) != 8:
-                    raise UserError(
-                        f"{path}:{line_no}: a TUM line has 8 numbers (t tx ty tz qx qy qz qw), found {len(fields)}"
-                    )
-                try:
-                    rows.append([float(x) for x in fields])
-                except ValueError as err:
-                    raise UserError(f"{path}:{line_no}: not a number ({err})") from err
-    except OSError as err:
-        raise UserError(f"cannot read trajectory {path}: {err.strerror}") from err
-    data = np.array(rows, dtype=np.float64).reshape(-1, 8)
+    rows = read_rows(path, "trajectory", "tum")
+    data = np.array([values for _, values in rows], dtype=np.float64).reshape(-1, 8)
     return _checked(data[:, 0], data[:, 1:4], data[:, 4:8], str(path))
 
 

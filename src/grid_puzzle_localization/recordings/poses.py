@@ -18,11 +18,20 @@ import numpy as np
 from grid_puzzle_localization.errors import UserError
 
 POSE_FORMATS = ("kitti", "tum", "matrix")
+# Numbers a line of each format and what they are (for the error on a line of another width).
+LINE_LAYOUTS = {
+    "kitti": (12, "the top 3 rows of the 4x4 pose, row-major"),
+    "tum": (8, "t tx ty tz qx qy qz qw"),
+    "matrix": (4, "one row of a 4x4 pose"),
+}
 RIGID_TOLERANCE = 1e-3  # max |R^T R - I| entry: text files round poses to about 6 digits
 
 
-def _rows(path: str | os.PathLike) -> list[tuple[int, list[float]]]:
-    """(line number, numbers) of the non-empty, non-comment lines of a text file."""
+def read_rows(path: str | os.PathLike, what: str, fmt: str | None = None) -> list[tuple[int, list[float]]]:
+    """(line number, numbers) of the non-empty, non-comment (``#``) lines of a text file of numbers separated
+    by spaces or commas. With ``fmt`` (one of ``LINE_LAYOUTS``) every line must have that format's width.
+    ``what`` names the file in the error when it cannot be read ("trajectory", "pose file"...)."""
+    width, layout = LINE_LAYOUTS[fmt] if fmt else (None, "")
     rows = []
     try:
         with open(path) as f:
@@ -31,20 +40,25 @@ def _rows(path: str | os.PathLike) -> list[tuple[int, list[float]]]:
                 if not text or text.startswith("#"):
                     continue
                 try:
-                    rows.append((line_no, [float(v) for v in text.replace(",", " ").split()]))
+                    values = [float(v) for v in text.replace(",", " ").split()]
                 except ValueError as err:
                     raise UserError(f"{path}:{line_no}: not a number ({err})") from None
+                if width is not None and len(values) != width:
+                    raise UserError(
+                        f"{path}:{line_no}: a {fmt} line has {width} numbers ({layout}), found {len(values)}"
+                    )
+                rows.append((line_no, values))
     except OSError as err:
-        raise UserError(f"cannot read {path}: {err.strerror}; check the path") from None
+        raise UserError(f"cannot read {what} {path}: {err.strerror}; check the path") from None
     return rows
 
 
 def guess_format(path: str | os.PathLike) -> str:
     """The format of a pose file from the numbers on its first line (12: kitti, 8: tum, 4: matrix)."""
-    rows = _rows(path)
+    rows = read_rows(path, "pose file")
     if not rows:
         raise UserError(f"{path}: no poses in the file")
-    formats = {12: "kitti", 8: "tum", 4: "matrix"}
+    formats = {width: fmt for fmt, (width, _) in LINE_LAYOUTS.items()}
     width = len(rows[0][1])
     if width not in formats:
         raise UserError(
@@ -59,11 +73,7 @@ def read_poses(path: str | os.PathLike, fmt: str) -> tuple[np.ndarray, np.ndarra
     the file and the line of a bad pose."""
     if fmt not in POSE_FORMATS:
         raise UserError(f"unknown pose format '{fmt}'; use one of {', '.join(POSE_FORMATS)}")
-    rows = _rows(path)
-    width = {"kitti": 12, "tum": 8, "matrix": 4}[fmt]
-    for line_no, values in rows:
-        if len(values) != width:
-            raise UserError(f"{path}:{line_no}: {len(values)} numbers; a {fmt} pose line has {width}")
+    rows = read_rows(path, "pose file", fmt)
     if not rows:
         raise UserError(f"{path}: no poses in the file")
     data = np.array([values for _, values in rows], dtype=np.float64)
@@ -117,7 +127,7 @@ def check_rigid(poses: np.ndarray, path: str | os.PathLike, lines: list[int]) ->
 
 def read_times(path: str | os.PathLike) -> np.ndarray:
     """Scan times [s], one number a line (the first number of a line when there are more)."""
-    rows = _rows(path)
+    rows = read_rows(path, "times file")
     if not rows:
         raise UserError(f"{path}: no times in the file")
     return np.array([values[0] for _, values in rows], dtype=np.float64)
