@@ -1,8 +1,8 @@
-#include "grid_puzzle_localization/localizer.hpp"
-
 #include <algorithm>
 #include <sstream>
 #include <string>
+
+#include "grid_puzzle_localization/localizer.hpp"
 
 namespace grid_puzzle_localization {
 
