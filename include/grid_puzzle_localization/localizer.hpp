@@ -135,6 +135,9 @@ struct LocalizerOutput {
   bool match_accepted = false;  ///< false: pose is the prediction
   /// No match was accepted on this scan, after the hypotheses and the search: the pose is not measured.
   bool lost = false;
+  /// When lost: the region the pose can be in (around the last accepted pose, radius growing with the time since),
+  /// which a map source should cover for the search to find the pose. Radius 0 otherwise.
+  SearchRegion search_region;
   /// The pose may be published: a match was accepted, or the last accepted one is at most
   /// lost.max_coast_time old and a gyro covers the time since.
   bool publish = false;

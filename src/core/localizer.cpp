@@ -374,6 +374,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     return out;
   }
   out.lost = !out.match_accepted;
+  if (out.lost) out.search_region = region;
   out.since_last_match = fresh ? 0.0 : elapsed;
   if (out.match_accepted) {
     out.recovered = !fresh && elapsed > config_.lost.max_coast_time;

@@ -513,7 +513,15 @@ TEST(Localizer, WithAGyroThePredictionIsPublishedForMaxCoastTime) {
     if (time <= c.prediction.max_extrapolation + 1e-9) EXPECT_TRUE(out.publish) << "scan " << i;
     if (time > c.lost.max_coast_time + 1e-9) EXPECT_FALSE(out.publish) << "scan " << i;
     if (out.publish) EXPECT_LT(t::translationError(out.pose, first.pose), 1e-6) << "scan " << i;  // held
+    // Lost: the region the pose can be in (a map source covers it for the search) is centred on the last accepted
+    // pose, its radius grown at max_speed (no motion measured yet) over the time since, up to max_radius.
+    EXPECT_TRUE(out.lost) << "scan " << i;
+    EXPECT_LT(t::translationError(out.search_region.centre, first.pose), 1e-6) << "scan " << i;
+    EXPECT_NEAR(out.search_region.radius,
+                std::min(c.prediction.max_radius, c.prediction.min_radius + c.prediction.max_speed * time), 1e-9)
+        << "scan " << i;
   }
+  EXPECT_EQ(first.search_region.radius, 0.0);  // tracking: no region
 }
 
 // globalLocalize without any initial pose: the next scan starts from its answer.

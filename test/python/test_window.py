@@ -16,6 +16,7 @@ from grid_puzzle_localization.provider.window import (
     compute_window,
     sector_of,
     sector_of_degrees,
+    window_covering,
 )
 
 # The Table I: (lo_deg, hi_deg, (du_min, du_max), (dv_min, dv_max)) in units of k.
@@ -118,6 +119,26 @@ def test_update_distance_gating_defaults_to_half_a_tile_and_keeps_the_heading():
     # A short wiggle backwards does not flip the heading (no update).
     assert tracker.update(PoseSample(0.5, 0.0)) is None
     assert tracker.window.sector == 0
+
+
+def test_restart_recomputes_at_the_next_pose_and_keeps_the_heading():
+    tracker = WindowTracker(WindowConfig(n=1, k=1), s=2.0)
+    tracker.update(PoseSample(0.0, 0.0))
+    tracker.update(PoseSample(3.0, 0.0))  # heading +x (sector 0)
+    tracker.restart()
+    w = tracker.update(PoseSample(3.1, 0.0))  # 0.1 m: would not update without the restart
+    assert w is not None and w.sector == 0 and w.bounds == (0, 3, -1, 1)
+
+
+def test_window_covering_a_square_holds_the_window_and_every_tile_meeting_the_square():
+    s = 2.0
+    window = compute_window(5.0, 5.0, 0.0, s, n=1, k=3)  # i 1..6, j 1..3
+    grown = window_covering(window, 4.0, 4.0, 7.0, s)  # x, y in [-3, 11]: tiles -2..5
+    assert grown.bounds == (-2, 6, -2, 5)
+    assert grown.center == (2, 2) and grown.sector == NO_SECTOR
+    assert window_covering(None, 4.0, 4.0, 7.0, s).bounds == (-2, 5, -2, 5)
+    # A square inside the window leaves it as it is.
+    assert window_covering(window, 5.0, 5.0, 0.5, s).bounds == window.bounds
 
 
 def test_explicit_update_distance():

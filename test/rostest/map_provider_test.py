@@ -3,7 +3,8 @@
 path with turns. Checks the deltas (tiles by reference), the merged map_cloud (switched on here) and the
 status against a brute-force selection over the directory listing, and the standing start, a corrupt tile
 (named in the deltas, left out of map_cloud: the localizer reports it), late subscribers, ~resend, a pose
-far off the map, a tile directory rewritten under the node and a missing tile directory."""
+far off the map, the window grown for a lost localizer's search, a tile directory rewritten under the node and a
+missing tile directory."""
 
 import math
 import os
@@ -20,7 +21,7 @@ import rospkg
 import rospy
 import rostest
 from fixtures.synthetic_tiles import write_tiles
-from grid_puzzle_localization.msg import ProviderStatus, TileDelta
+from grid_puzzle_localization.msg import NdtStatus, ProviderStatus, TileDelta
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
@@ -114,10 +115,12 @@ class MapProviderTest(unittest.TestCase):
         script = os.path.join(rospkg.RosPack().get_path(PKG), "scripts", "grid_puzzle_map_provider")
         cls.proc = subprocess.Popen([sys.executable, script, "__name:=provider", "odom:=/odom"])
         cls.odom = rospy.Publisher("/odom", Odometry, queue_size=100)
+        cls.localizer_status = rospy.Publisher("/localizer_status", NdtStatus, queue_size=10)
         deadline = time.monotonic() + WAIT
-        while (cls.odom.get_num_connections() == 0 or cls.deltas.sub.get_num_connections() == 0) and (
-            time.monotonic() < deadline
-        ):
+        publishers = (cls.odom, cls.localizer_status)
+        while (
+            any(p.get_num_connections() == 0 for p in publishers) or cls.deltas.sub.get_num_connections() == 0
+        ) and time.monotonic() < deadline:
             rospy.sleep(0.1)
         cls.mirror = set()
         cls.last_revision = 0
@@ -231,6 +234,31 @@ class MapProviderTest(unittest.TestCase):
         self.apply_new_deltas()
         self.assertTrue(self.mirror)
         self.assert_map_cloud_is(set(self.mirror))
+
+    def test_4b_a_lost_localizer_gets_its_search_region_then_the_window_follows_the_pose_again(self):
+        self.apply_new_deltas()
+        home = expected_bounds(5.3, 5.3, 225.0)
+        self.assertEqual(self.mirror, brute_force_window_files(self.dir, home, S))
+        status = NdtStatus(lost=True, search_x=5.3, search_y=5.3, search_radius=7.0)
+        status.header.stamp = rospy.Time.now()
+        self.localizer_status.publish(status)
+        # Half side: radius 7 m + n s (2 m), rounded up to 10 m; the union with the window it had.
+        grown = (math.floor(-4.7 / S), math.floor(15.3 / S), math.floor(-4.7 / S), math.floor(15.3 / S))
+        self.deltas.wait_for(lambda d: (d.i_min, d.i_max, d.j_min, d.j_max) == grown, f"the search's window {grown}")
+        self.apply_new_deltas()
+        # The pose published while lost is a prediction: the window does not follow it.
+        self.send(9.3, 5.3)
+        rospy.sleep(1.0)
+        self.assertEqual(self.apply_new_deltas(), [])
+        self.localizer_status.publish(NdtStatus(match_accepted=True))
+        rospy.sleep(0.3)
+        self.send(5.3, 5.3)
+        seen = MapProviderTest.last_revision
+        self.deltas.wait_for(
+            lambda d: d.revision > seen and (d.i_min, d.i_max, d.j_min, d.j_max) == home, "the window back at the pose"
+        )
+        self.apply_new_deltas()
+        self.assertEqual(self.mirror, brute_force_window_files(self.dir, home, S))
 
     def test_5_a_rewritten_directory_is_sent_again_as_a_reset_with_a_new_revision(self):
         self.apply_new_deltas()

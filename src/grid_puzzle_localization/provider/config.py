@@ -5,6 +5,7 @@ Nested dataclasses are parameter groups: ``window.n`` is the ROS parameter ``~wi
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -22,9 +23,18 @@ class TilesConfig:
 
 
 @dataclass(frozen=True)
+class LostConfig:
+    """While the localizer is lost (its status on `localizer_status`), the window grows to hold the region its
+    search covers: the square of half side (search radius + n s) around the last accepted pose, capped."""
+
+    max_half_side: float = 100.0  # [m] >= 0; largest half side of that square; 0 = the window never grows
+
+
+@dataclass(frozen=True)
 class ProviderConfig:
     tiles: TilesConfig = field(default_factory=TilesConfig)
     window: WindowConfig = field(default_factory=WindowConfig)
+    lost: LostConfig = field(default_factory=LostConfig)
     pose_source: str = "odom"  # odom: nav_msgs/Odometry on `odom`; pose: PoseWithCovarianceStamped on `pose`
     publish_map_cloud: bool = False  # publish the merged window on the latched `map_cloud` (read while subscribed)
     map_cloud_period: float = 1.0  # [s] publish map_cloud at most this often (the latest window); 0 = every change
@@ -40,6 +50,8 @@ class ProviderConfig:
             )
         if not self.map_cloud_period >= 0.0:
             raise UserError(f"parameter map_cloud_period must be >= 0 s (got {self.map_cloud_period})")
+        if not (math.isfinite(self.lost.max_half_side) and self.lost.max_half_side >= 0.0):
+            raise UserError(f"parameter lost/max_half_side must be >= 0 m (got {self.lost.max_half_side}); 0 = off")
         if self.pose_source not in POSE_SOURCES:
             raise UserError(f"parameter pose_source '{self.pose_source}' is unknown; use one of {POSE_SOURCES}")
         return dataclasses.replace(self, window=self.window.resolved())

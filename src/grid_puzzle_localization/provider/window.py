@@ -147,6 +147,18 @@ def compute_window(x: float, y: float, theta: float | None, s: float, n: int, k:
     return Window(center, theta, sector, (-n + du_min * k, n + du_max * k), (-n + dv_min * k, n + dv_max * k))
 
 
+def window_covering(window: Window | None, x: float, y: float, half_side: float, s: float) -> Window:
+    """The smallest window that holds ``window`` (when given) and every tile meeting the square of half side
+    ``half_side`` [m] around (x, y) [m], centred on (x, y)'s tile, without a heading."""
+    i0, i1 = tile_index(x - half_side, s), tile_index(x + half_side, s)
+    j0, j1 = tile_index(y - half_side, s), tile_index(y + half_side, s)
+    if window is not None:
+        i0, i1 = min(i0, window.i_min), max(i1, window.i_max)
+        j0, j1 = min(j0, window.j_min), max(j1, window.j_max)
+    ci, cj = tile_index(x, s), tile_index(y, s)
+    return Window((ci, cj), math.nan, NO_SECTOR, (i0 - ci, i1 - ci), (j0 - cj, j1 - cj))
+
+
 @dataclass(frozen=True)
 class PoseSample:
     """One pose in the map frame: position [m], time [s], optional yaw [rad] and velocity [m/s]."""
@@ -192,6 +204,11 @@ class WindowTracker:
         self._anchor = pose
         self.window = compute_window(cx, cy, self._theta, self.s, self.config.n, self.config.k)
         return self.window
+
+    def restart(self) -> None:
+        """The next pose recomputes the window wherever it is (the heading is kept), e.g. after a window that
+        did not follow the pose."""
+        self._anchor = None
 
     def lookahead_point(self, pose: PoseSample, anchor: PoseSample | None) -> tuple[float, float]:
         """Position the window is centred on: the pose, moved ahead by velocity * lookahead_time. The

@@ -8,6 +8,9 @@ by reference on ``tile_delta`` (TileDelta: tile names and their directory; the l
 the latched ``~status``. The node holds no point data. When ``publish_map_cloud`` is set it also tells the
 map_cloud publisher (map_cloud_publisher.py, a thread of its own) that the window changed; that thread reads
 the window's files only while ``map_cloud`` has subscribers.
+While the localizer reports itself lost (its NdtStatus on ``localizer_status``) the window grows to hold the
+region its search covers (``lost/max_half_side``) and stops following the coasting pose; the first pose after it
+tracks again recomputes the window there.
 A tile directory rewritten under the running node (a new index revision) is reopened and the whole window
 sent again as a reset delta.
 Delta protocol: every broadcast delta increments ``revision`` by one; a new
@@ -18,10 +21,12 @@ can recover.
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import threading
 import time
+from dataclasses import dataclass
 
 import rospy
 from geometry_msgs.msg import PoseWithCovarianceStamped
@@ -29,16 +34,27 @@ from nav_msgs.msg import Odometry
 from std_srvs.srv import Trigger, TriggerResponse
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.msg import ProviderStatus, TileDelta
+from grid_puzzle_localization.msg import NdtStatus, ProviderStatus, TileDelta
 from grid_puzzle_localization.provider.config import ProviderConfig, load_config
 from grid_puzzle_localization.provider.tile_references import TileReferences
-from grid_puzzle_localization.provider.window import PoseSample, Window, WindowTracker
+from grid_puzzle_localization.provider.window import PoseSample, Window, WindowTracker, window_covering
 from grid_puzzle_localization.ros.msgs.map_cloud_publisher import MapCloudPublisher
 from grid_puzzle_localization.ros.msgs.provider import pose_sample, provider_status, stamped, tile_delta
 from grid_puzzle_localization.tiles.directory import open_tile_directory
 from grid_puzzle_localization.util.malloc_tuning import limit_arenas, pin_mmap_threshold
 
 WARN_PERIOD = 5.0  # [s] throttle of repeated warnings (off the map, wrong frame)
+SEARCH_STEP = 10.0  # [m] the window serving a search grows in steps of this (a delta every few scans, not each)
+
+
+@dataclass(frozen=True)
+class SearchRegion:
+    """Where the lost localizer searches: centre [m] (map frame), radius [m], stamp [s]."""
+
+    x: float
+    y: float
+    radius: float
+    t: float
 
 
 class ResetOnSubscribe(rospy.SubscribeListener):
@@ -74,6 +90,9 @@ class MapProviderNode:
         self._window: Window | None = None
         self._off_map = False
         self._latest: PoseSample | None = None
+        self._search: SearchRegion | None = None  # the lost localizer's latest search region
+        self._tracking_again = False  # the localizer tracks again after a loss
+        self._searching = False  # the window serves the localizer's search, not the pose
         self._pose_ready = threading.Condition()
 
         self.delta_pub = rospy.Publisher(
@@ -93,6 +112,8 @@ class MapProviderNode:
             rospy.Subscriber("initialpose", PoseWithCovarianceStamped, self._on_pose, queue_size=1)
         else:
             rospy.Subscriber("pose", PoseWithCovarianceStamped, self._on_pose, queue_size=1)
+        if self.config.lost.max_half_side > 0.0:
+            rospy.Subscriber("localizer_status", NdtStatus, self._on_localizer_status, queue_size=1)
         self._worker = threading.Thread(target=self._run, name="map_provider_worker", daemon=True)
         self._worker.start()
         rospy.loginfo(
@@ -115,6 +136,18 @@ class MapProviderNode:
     def _on_pose(self, msg: PoseWithCovarianceStamped) -> None:
         if self._frame_ok(msg.header.frame_id):
             self._offer(pose_sample(msg.pose.pose, msg.header.stamp))
+
+    def _on_localizer_status(self, msg: NdtStatus) -> None:
+        with self._pose_ready:
+            if msg.lost and msg.search_radius > 0.0:
+                self._search = SearchRegion(msg.search_x, msg.search_y, msg.search_radius, msg.header.stamp.to_sec())
+                self._tracking_again = False
+            elif msg.match_accepted:
+                self._search = None
+                self._tracking_again = True
+            else:
+                return
+            self._pose_ready.notify()
 
     def _frame_ok(self, frame_id: str) -> bool:
         if frame_id in ("", self.frame):
@@ -142,13 +175,40 @@ class MapProviderNode:
                 if self._latest is None:
                     self._pose_ready.wait(0.5)
                 pose, self._latest = self._latest, None
+                search, self._search = self._search, None
+                if self._tracking_again and self._searching:
+                    self._searching = False
+                    self.tracker.restart()  # the next pose is measured again: the window goes back to it
+                self._tracking_again = False
             self._follow_directory()
-            if pose is None:
-                continue
+            if search is not None:
+                self._cover_search(search)
+            if pose is None or self._searching:
+                continue  # while the localizer is lost its pose is a prediction: the search's window stays
             start = time.perf_counter()
             window = self.tracker.update(pose)
             if window is not None:
                 self._serve(pose, window, start)
+
+    def _cover_search(self, region: SearchRegion) -> None:
+        """Grows the window to the square of half side (search radius + n s, rounded up to SEARCH_STEP) around
+        the search centre, at most lost/max_half_side."""
+        start = time.perf_counter()
+        reach = region.radius + self.tracker.config.n * self.s
+        half_side = min(math.ceil(reach / SEARCH_STEP) * SEARCH_STEP, self.config.lost.max_half_side)
+        window = window_covering(self.tracker.window, region.x, region.y, half_side, self.s)
+        if self._window is not None and window.bounds == self._window.bounds:
+            return
+        if not self._searching:
+            rospy.logwarn(
+                "the localizer is lost: the window grows to %.0f m x %.0f m around (%.1f, %.1f) m for its search",
+                (window.i_max - window.i_min + 1) * self.s,
+                (window.j_max - window.j_min + 1) * self.s,
+                region.x,
+                region.y,
+            )
+        self._searching = True
+        self._serve(PoseSample(region.x, region.y, region.t), window, start)
 
     def _follow_directory(self) -> None:
         """Sends the whole window again when the tile directory was rewritten (new index revision)."""
