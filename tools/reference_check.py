@@ -1,0 +1,145 @@
+#!/usr/bin/env python3
+"""Where a recording's reference poses agree with its own scans: each pair of consecutive scans is registered by
+the core NDT (`ndt_align`, scan k+1 onto scan k) and the motion it finds is compared with the motion the
+reference poses give.
+
+SLAM output used as a reference (the MulRan keyframes' FAST-LIO2 odometry) can be metres off where its odometry
+slid along a featureless road; a localizer's error against it there is the reference's as much as its own. The
+registration uses the scans' structure only: the ground (whose rings around the sensor look the same in every
+scan and pull consecutive scans onto each other) and the points within MIN_RANGE_M are left out. It starts from the
+reference's motion scaled by 0, 0.5, 1 and 1.5 (so a reference that overstates or reverses the motion does not
+choose the answer) and keeps the best fit (NVTL); when another start ends more than MAX_SHIFT_M away with a fit
+within AMBIGUOUS_RATIO of the best, the scans cannot tell the motion (a featureless road) and the pair is
+*ambiguous*. A pair is *consistent* when the registration converged, fits (NVTL >= MIN_NVTL), is not ambiguous and
+lies within MAX_SHIFT_M and MAX_TURN_DEG of the reference's motion. A scan's reference is *trusted* when both pairs
+it belongs to are consistent.
+
+Usage: reference_check.py SCANS_DIR POSES.kitti FIRST LAST [--json OUT]  (prints one JSON line per pair and a
+summary line; needs the built workspace for ndt_align)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from grid_puzzle_localization.pcd.writer import write_pcd
+from grid_puzzle_localization.recordings.poses import read_poses
+from grid_puzzle_localization.recordings.scans import read_scan, scan_files
+
+NDT_ALIGN = Path(os.environ.get("GPL_WS", "")) / "devel/lib/grid_puzzle_localization/ndt_align"
+STARTS = (0.0, 0.5, 1.0, 1.5)  # scale factors of the reference's translation the registration starts from
+MIN_NVTL = 0.5  # the localizer's match/min_nvtl default
+MAX_SHIFT_M = 0.3  # [m] registration and reference motion agree within this ...
+MAX_TURN_DEG = 0.5  # [deg] ... and this
+AMBIGUOUS_RATIO = 0.98  # another answer fitting this well (NVTL ratio) makes the pair ambiguous
+MIN_RANGE_M = 3.0  # [m] points closer to the sensor are left out (the vehicle itself)
+ABOVE_GROUND_M = 0.5  # [m] points less than this above the scan's ground (its lowest 5 % of heights) are left out
+
+
+def structure(scan: Path, out: Path) -> Path:
+    """Writes the x y z of ``scan``'s structure points (no ground, nothing near the sensor) to ``out``."""
+    points = read_scan(scan)
+    xyz = np.stack([points["x"], points["y"], points["z"]], axis=1).astype(np.float32)
+    near = np.linalg.norm(xyz[:, :2], axis=1) < MIN_RANGE_M
+    ground = np.percentile(xyz[~near, 2], 5.0) if (~near).any() else 0.0
+    keep = xyz[~near & (xyz[:, 2] > ground + ABOVE_GROUND_M)]
+    cloud = np.empty(len(keep), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4")])
+    cloud["x"], cloud["y"], cloud["z"] = keep.T
+    write_pcd(out, cloud)
+    return out
+
+
+def register(target: Path, source: Path, guess: np.ndarray) -> dict:
+    """ndt_align's answer for ``source`` onto ``target`` from the 4x4 ``guess`` (T_target_source)."""
+    rpy = Rotation.from_matrix(guess[:3, :3]).as_euler("xyz")  # fixed-axis roll, pitch, yaw
+    pose = [*map(str, guess[:3, 3]), *map(str, rpy)]
+    args = [str(NDT_ALIGN), str(target), str(source), "--threads", "1", "--guess", *pose]
+    done = subprocess.run(args, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"ndt_align failed on {target.name} <- {source.name}: {done.stderr.strip()}")
+    return json.loads(done.stdout)
+
+
+def check_pair(target: Path, source: Path, reference: np.ndarray) -> dict:
+    """The best registration from the scaled starts, and how far it is from the reference motion."""
+    answers = []
+    for scale in STARTS:
+        guess = reference.copy()
+        guess[:3, 3] *= scale
+        r = register(target, source, guess)
+        if r["status"] in ("OK", "MAX_ITERATIONS"):
+            answers.append(r)
+    if not answers:
+        return {"consistent": False, "ambiguous": False, "reason": "no registration"}
+    best = max(answers, key=lambda r: r["nvtl"])
+    found = np.asarray(best["transform"])
+    ambiguous = any(
+        r["nvtl"] >= AMBIGUOUS_RATIO * best["nvtl"]
+        and np.linalg.norm(np.asarray(r["transform"])[:3, 3] - found[:3, 3]) > MAX_SHIFT_M
+        for r in answers
+    )
+    difference = np.linalg.inv(reference) @ found
+    shift = float(np.linalg.norm(difference[:3, 3]))
+    turn = float(np.degrees(Rotation.from_matrix(difference[:3, :3]).magnitude()))
+    agrees = shift <= MAX_SHIFT_M and turn <= MAX_TURN_DEG
+    consistent = bool(best["converged"] and best["nvtl"] >= MIN_NVTL and not ambiguous and agrees)
+    return {
+        "consistent": consistent,
+        "ambiguous": ambiguous,
+        "nvtl": round(best["nvtl"], 3),
+        "reference_step_m": round(float(np.linalg.norm(reference[:3, 3])), 3),
+        "registered_step_m": round(float(np.linalg.norm(found[:3, 3])), 3),
+        "shift_m": round(shift, 3),
+        "turn_deg": round(turn, 3),
+    }
+
+
+def check(scans_dir: Path, poses_path: Path, first: int, last: int) -> tuple[list[dict], set[int]]:
+    """Per pair (k, k+1) for first <= k < last: the check's row; and the scans whose reference is trusted."""
+    files = scan_files(scans_dir)
+    poses, _ = read_poses(poses_path, "kitti")
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        crops = {k: structure(files[k], Path(tmp) / f"{k}.pcd") for k in range(first, last + 1)}
+        for k in range(first, last):
+            reference = np.linalg.inv(poses[k]) @ poses[k + 1]
+            rows.append({"scan": k, "next": k + 1, **check_pair(crops[k], crops[k + 1], reference)})
+    consistent = {row["scan"] for row in rows if row["consistent"]}
+    trusted = {k for k in range(first + 1, last) if k - 1 in consistent and k in consistent}
+    return rows, trusted
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("scans", type=Path)
+    parser.add_argument("poses", type=Path, help="KITTI poses, one line per scan file")
+    parser.add_argument("first", type=int)
+    parser.add_argument("last", type=int)
+    parser.add_argument("--json", type=Path, help="also write the trusted scans and the rows to this file")
+    args = parser.parse_args()
+    rows, trusted = check(args.scans, args.poses, args.first, args.last)
+    for row in rows:
+        print(json.dumps(row))
+    summary = {
+        "pairs": len(rows),
+        "consistent_pairs": sum(r["consistent"] for r in rows),
+        "ambiguous_pairs": sum(r["ambiguous"] for r in rows),
+        "trusted_scans": len(trusted),
+    }
+    print(json.dumps(summary))
+    if args.json:
+        args.json.write_text(json.dumps({**summary, "trusted": sorted(trusted), "rows": rows}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
