@@ -6,10 +6,11 @@ Data sets:
 - sim_courtyard, sim_urban: a world of `gpm simulate` at --scale, its prior map built from sweeps every
   --keyframe-spacing metres of the mapping run (with the simulated drift of its pose estimate), and single sweeps
   simulated at random poses of the localization route; base frame = lidar frame, truth = the simulator's pose;
-- mulran_riverside02: real Ouster OS1-64 keyframes, scans 50-215, with the FAST-LIO2 odometry as the reference
-  (SOURCES.md: locally consistent to about 0.1 m from scan to scan; not ground truth, and the reference mode shows
-  where it disagrees with the map). The map is built from the even-numbered scans, the odd-numbered ones are
-  localized;
+- mulran_riverside02: real Ouster OS1-64 keyframes, scans 50-215 ($GPL_SHARED_DATA or ../shared/data/real beside
+  the clone), with the FAST-LIO2 odometry as the reference (not ground truth: the reference mode shows where it
+  disagrees with the map, and tools/reference_check.py where it disagrees with the motion between the scans; the
+  success rate is also given over the trials whose scan's reference agrees with both neighbours). The map is built
+  from the even-numbered scans, the odd-numbered ones are localized;
 - quick (--quick): a tiny synthetic street (fixtures.synthetic_scene), a few seconds in all.
 Each trial rotates the scan by a random yaw and centres the search up to --offset m away from the truth in a
 random direction. Success: accepted and within 0.3 m and 1 deg of the truth. Modes: the default search
@@ -37,16 +38,23 @@ from hardware import cpu_model
 
 from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array, xyz_records
 
-MULRAN = Path("/work/shared/data/real/mulran_riverside02")
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tools"))
+from reference_check import check  # noqa: E402
+
+SHARED = Path(os.environ.get("GPL_SHARED_DATA") or ROOT.parent / "shared" / "data" / "real")
+MULRAN = SHARED / "mulran_riverside02"
 MULRAN_SCANS = range(50, 216)
 SUCCESS_M, SUCCESS_DEG = 0.3, 1.0
 
 
 class Trial:
-    """One search: the scan file (base frame), the true map_T_base (4x4) and the search centre."""
+    """One search: the scan file (base frame), the true map_T_base (4x4), the search centre and, for a reference
+    that is not ground truth, whether it agrees with the scans around (None: not checked)."""
 
     def __init__(self, scan: Path, truth: np.ndarray, center: tuple[float, float]) -> None:
         self.scan, self.truth, self.center = scan, truth, center
+        self.trusted: bool | None = None
 
 
 def yaw_matrix(yaw: float) -> np.ndarray:
@@ -127,13 +135,16 @@ def refusal_kind(reason: str) -> str:
 
 
 def summary(
-    dataset: str, mode: str, size: float, threads: int, rows: list[dict], reference_ok: list[bool] | None
+    dataset: str, mode: str, size: float, threads: int, rows: list[dict], reference_ok: list[bool] | None, trials
 ) -> dict:
     """``reference_ok``: per trial, whether the refinement from the reference pose met the success criterion
     (None when the reference mode did not run); the success rate over those trials is what a search can reach
-    against a reference that disagrees with the map elsewhere."""
+    against a reference that disagrees with the map elsewhere. Trials whose ``trusted`` is set also give the
+    success rate over those whose reference agrees with the motion between the scans."""
     accepted = [r for r in rows if r["found"]]
     consistent = [r for k, r in enumerate(rows) if reference_ok is not None and reference_ok[k]]
+    checked = [t.trusted is not None for t in trials]
+    trusted = [r for r, t in zip(rows, trials) if t.trusted]
     return {
         "dataset": dataset,
         "mode": mode,
@@ -145,6 +156,10 @@ def summary(
         "trials_where_reference_fits": len(consistent) if reference_ok is not None else None,
         "success_rate_where_reference_fits": (
             sum(r["success"] for r in consistent) / len(consistent) if consistent else None
+        ),
+        "trials_where_reference_trusted": len(trusted) if any(checked) else None,
+        "success_rate_where_reference_trusted": (
+            sum(r["success"] for r in trusted) / len(trusted) if trusted else None
         ),
         "refused": len(rows) - len(accepted),
         "accepted_wrong": sum(not r["success"] for r in accepted),
@@ -241,10 +256,12 @@ def mulran_dataset(directory: Path, trials: int, offset: float, rng) -> tuple[Pa
     map_pcd = directory / "mulran_map.pcd"
     write_pcd(map_pcd, xyz_records(np.concatenate(parts).astype(np.float32)))
     held = [k for k in MULRAN_SCANS if k % 2 == 1]
+    _, trusted = check(MULRAN / "Scans", MULRAN / "odom_poses.txt", MULRAN_SCANS[0], MULRAN_SCANS[-1])
     out = []
     for n in range(trials):
         k = held[n % len(held)]
         out.append(make_trial(directory, f"mulran_{n}", scan(k), pose(k), offset, rng))
+        out[-1].trusted = k in trusted
     return map_pcd, out
 
 
@@ -301,7 +318,7 @@ def main() -> int:
                 )
             elif dataset == "mulran_riverside02":
                 if not MULRAN.is_dir():
-                    print(json.dumps({"dataset": dataset, "skipped": f"{MULRAN} is absent (no /work/shared)"}))
+                    print(json.dumps({"dataset": dataset, "skipped": f"{MULRAN} is absent (set GPL_SHARED_DATA)"}))
                     continue
                 map_pcd, data = mulran_dataset(directory, trials, args.offset, rng)
             else:
@@ -317,7 +334,7 @@ def main() -> int:
                         print(json.dumps({"dataset": dataset, "mode": mode, **r}))
                 if mode == "reference":
                     reference_ok = [r["success"] for r in rows]
-                row = summary(dataset, mode, size, args.threads, rows, reference_ok)
+                row = summary(dataset, mode, size, args.threads, rows, reference_ok, data)
                 row.update(hardware, load_average_1min=os.getloadavg()[0], overrides=args.set)
                 print(json.dumps(row), flush=True)
     return 0

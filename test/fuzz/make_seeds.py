@@ -1,7 +1,6 @@
 """Writes the seed corpora of the fuzz targets into test/fuzz/seeds/<target>/ (committed; each file a few
 hundred bytes): PCD files in every encoding and layout the readers accept (padding, float64, COUNT > 1,
-organised clouds, NaN points), the first points of the real scans in /work/shared/data/real when that
-directory exists, tile indexes, and PointCloud2 layouts. Usage: python3 test/fuzz/make_seeds.py"""
+organised clouds, NaN points), the first points of the real scans committed in test/data, tile indexes, and PointCloud2 layouts. Usage: python3 test/fuzz/make_seeds.py"""
 
 from __future__ import annotations
 
@@ -18,7 +17,7 @@ from grid_puzzle_localization.pcd.reader import read_pcd
 from grid_puzzle_localization.pcd.writer import write_pcd
 
 SEEDS = Path(__file__).resolve().parent / "seeds"
-REAL = Path("/work/shared/data/real")
+REAL = Path(__file__).resolve().parents[1] / "data"
 REAL_FILES = ("hdl32_pair/251370668.pcd", "isprs_terrain_utm/samp11-utm.pcd")
 POINTS = 6  # per seed cloud: enough for every code path, small enough for the fuzzer to mutate
 
