@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -154,6 +155,7 @@ def main() -> int:
         scenario, run = args.out / variant, args.out / f"{variant}_run"
         command = VARIANTS[variant][0]
         subprocess.run([*GPM, *command, "-o", str(scenario), "--force", "--quiet"], check=True)
+        shutil.rmtree(run, ignore_errors=True)  # its tiles were cut from the map just replaced
         experiment = [*GPM, "experiment", str(scenario), "-o", str(run), "--ndt-threads", "1", "--rate", args.rate]
         if variant.startswith("mulran"):
             # A car's 64-beam scans reach far beyond the demo window (n 8: 17 m each side); the urban preset's

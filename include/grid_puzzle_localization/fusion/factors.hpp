@@ -27,8 +27,11 @@ using Matrix15d = Eigen::Matrix<double, 15, 15>;
 /// d(pose)/d(tangent) at `pose` (7 x 6, row-major as Ceres wants it).
 Eigen::Matrix<double, 7, 6, Eigen::RowMajor> posePlusJacobian(const double* pose);
 
-/// Plus(x, d) = (p + d_p, q * Exp(d_theta)). Ceres 2 calls this a Manifold, Ceres 1 a LocalParameterization.
-#if CERES_VERSION_MAJOR >= 2
+/// Ceres 2.1 replaced LocalParameterization (Ceres 1.14 on Ubuntu 20.04, and 2.0) by Manifold.
+#define GPL_CERES_HAS_MANIFOLD (CERES_VERSION_MAJOR > 2 || (CERES_VERSION_MAJOR == 2 && CERES_VERSION_MINOR >= 1))
+
+/// Plus(x, d) = (p + d_p, q * Exp(d_theta)): a Manifold from Ceres 2.1 on, else a LocalParameterization.
+#if GPL_CERES_HAS_MANIFOLD
 class PoseManifold : public ceres::Manifold {
  public:
   int AmbientSize() const override { return kPoseSize; }

@@ -37,7 +37,7 @@ Eigen::Matrix<double, 7, 6, Eigen::RowMajor> posePlusJacobian(const double* pose
   return j;
 }
 
-#if CERES_VERSION_MAJOR >= 2
+#if GPL_CERES_HAS_MANIFOLD
 bool PoseManifold::Plus(const double* x, const double* delta, double* x_plus_delta) const {
   posePlus(x, delta, x_plus_delta);
   return true;

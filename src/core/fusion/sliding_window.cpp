@@ -315,7 +315,7 @@ void SlidingWindow::solve() {
   const auto t0 = std::chrono::steady_clock::now();
   ceres::Problem::Options options;
   options.cost_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
-#if CERES_VERSION_MAJOR >= 2
+#if GPL_CERES_HAS_MANIFOLD
   options.manifold_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
 #else
   options.local_parameterization_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
