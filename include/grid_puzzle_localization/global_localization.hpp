@@ -61,7 +61,7 @@ struct GlobalLocalizationConfig {
   /// Distinct candidates (runner_up_distance / runner_up_yaw apart) within max_runner_up_ratio of the best that
   /// are refined by NDT, >= 1: candidates that converge to one pose are one answer, so the slope of one peak is
   /// not taken for a second place. More distinct candidates than this make the answer ambiguous.
-  int refine_candidates = 16;
+  int refine_candidates = 4;
   /// [m] refined poses closer than this ...
   double same_pose_distance = 0.5;
   /// [rad] ... and turned less than this are the same answer.
