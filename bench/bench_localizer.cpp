@@ -297,7 +297,10 @@ int main(int argc, char** argv) {
              "prediction_to_match_m,prediction_to_match_rad,prediction_error_m,prediction_error_rad,error_m,error_rad,"
              "truth_yaw_rate_rad_s,accepted,published,hypotheses,global_search,nvtl,global_search_reason\n";
   }
-  std::vector<double> latency, latency_pending, latency_quiet, cpu, update_ms, errors;
+  // latency_loading: scans that overlapped a target update and ran no branch-and-bound search (a search, e.g. on
+  // the first scan without a measured velocity, costs tens of ms whatever the map does).
+  std::vector<double> latency, latency_pending, latency_loading, latency_quiet, cpu, update_ms, errors;
+  std::size_t searches = 0;
   double first_scan_ms = 0.0;
   std::size_t rejected = 0;
   std::uint64_t generation = loc.map().stats().generation;
@@ -326,7 +329,10 @@ int main(int argc, char** argv) {
     } else {
       cpu.push_back(cpu_ms);
       latency.push_back(out.scan_ms);
-      (out.map_update_pending || out.map_swapped ? latency_pending : latency_quiet).push_back(out.scan_ms);
+      const bool pending = out.map_update_pending || out.map_swapped;
+      (pending ? latency_pending : latency_quiet).push_back(out.scan_ms);
+      if (pending && !out.global_search) latency_loading.push_back(out.scan_ms);
+      searches += out.global_search;
     }
     if (trace.is_open()) {
       const double dt = scan.stamp - last_stamp;
@@ -363,6 +369,7 @@ int main(int argc, char** argv) {
       "\"p99\": %.2f, \"max\": "
       "%.2f}, \"p99_over_p50\": %.2f, "
       "\"worst_latency_during_update_ms\": %.2f, \"scans_during_update\": %zu, \"p50_latency_during_update_ms\": %.2f, "
+      "\"worst_latency_during_update_without_search_ms\": %.2f, \"searches\": %zu, "
       "\"p99_latency_without_update_ms\": %.2f, \"scan_thread_cpu_ms\": {\"p50\": %.2f, \"p99\": %.2f}, "
       "\"target_updates\": %zu, "
       "\"target_update_ms\": {\"median\": %.1f, \"max\": %.1f}, \"rejected_matches\": %zu, "
@@ -372,9 +379,10 @@ int main(int argc, char** argv) {
       mode.c_str(), static_cast<std::size_t>(input.scans), first_scan_ms, percentile(latency, 0.5),
       percentile(latency, 0.95), percentile(latency, 0.99), percentile(latency, 1.0),
       percentile(latency, 0.99) / percentile(latency, 0.5), percentile(latency_pending, 1.0), latency_pending.size(),
-      percentile(latency_pending, 0.5), percentile(latency_quiet, 0.99), percentile(cpu, 0.5), percentile(cpu, 0.99),
-      updates, percentile(update_ms, 0.5), percentile(update_ms, 1.0), rejected, mean_error, percentile(errors, 1.0),
-      input.map.size(), tile_size, (2 * half_window + 1) * (2 * half_window + 1), config.ndt.threads,
-      config.map_update_threads, input.gyro.size(), peakRssMb());
+      percentile(latency_pending, 0.5), percentile(latency_loading, 1.0), searches, percentile(latency_quiet, 0.99),
+      percentile(cpu, 0.5), percentile(cpu, 0.99), updates, percentile(update_ms, 0.5), percentile(update_ms, 1.0),
+      rejected, mean_error, percentile(errors, 1.0), input.map.size(), tile_size,
+      (2 * half_window + 1) * (2 * half_window + 1), config.ndt.threads, config.map_update_threads, input.gyro.size(),
+      peakRssMb());
   return 0;
 }
