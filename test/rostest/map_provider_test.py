@@ -21,6 +21,7 @@ import rospkg
 import rospy
 import rostest
 from fixtures.synthetic_tiles import write_tiles
+from geometry_msgs.msg import PoseWithCovarianceStamped
 from grid_puzzle_localization.msg import NdtStatus, ProviderStatus, TileDelta
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import PointCloud2
@@ -60,6 +61,15 @@ def expected_bounds(x, y, heading_deg):
         if d < hi:
             return (i - N + du_min * K, i + N + du_max * K, j - N + dv_min * K, j + N + dv_max * K)
     raise AssertionError(d)
+
+
+def initial_pose(x, y):
+    msg = PoseWithCovarianceStamped()
+    msg.header.frame_id = "map"
+    msg.header.stamp = rospy.Time.now()
+    msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
+    msg.pose.pose.orientation.w = 1.0
+    return msg
 
 
 def tile_file_points(directory, key):
@@ -116,8 +126,9 @@ class MapProviderTest(unittest.TestCase):
         cls.proc = subprocess.Popen([sys.executable, script, "__name:=provider", "odom:=/odom"])
         cls.odom = rospy.Publisher("/odom", Odometry, queue_size=100)
         cls.localizer_status = rospy.Publisher("/localizer_status", NdtStatus, queue_size=10)
+        cls.initialpose = rospy.Publisher("/initialpose", PoseWithCovarianceStamped, queue_size=10)
         deadline = time.monotonic() + WAIT
-        publishers = (cls.odom, cls.localizer_status)
+        publishers = (cls.odom, cls.localizer_status, cls.initialpose)
         while (
             any(p.get_num_connections() == 0 for p in publishers) or cls.deltas.sub.get_num_connections() == 0
         ) and time.monotonic() < deadline:
@@ -259,6 +270,17 @@ class MapProviderTest(unittest.TestCase):
         )
         self.apply_new_deltas()
         self.assertEqual(self.mirror, brute_force_window_files(self.dir, home, S))
+        # Lost again; this time a pose given by hand (rviz's initialpose) takes the window back to it.
+        status.header.stamp = rospy.Time.now()
+        self.localizer_status.publish(status)
+        self.deltas.wait_for(lambda d: (d.i_min, d.i_max, d.j_min, d.j_max) == grown, "the search's window again")
+        self.apply_new_deltas()
+        seen = MapProviderTest.last_revision
+        self.initialpose.publish(initial_pose(5.3, 5.3))
+        self.deltas.wait_for(
+            lambda d: d.revision > seen and (d.i_min, d.i_max, d.j_min, d.j_max) == home, "the window at initialpose"
+        )
+        self.apply_new_deltas()
 
     def test_5_a_rewritten_directory_is_sent_again_as_a_reset_with_a_new_revision(self):
         self.apply_new_deltas()

@@ -109,7 +109,7 @@ class MapProviderNode:
             rospy.Subscriber("odom", Odometry, self._on_odom, queue_size=1)
             # The localizer publishes odom only once it has a map, which in tiles mode comes from here:
             # the start pose (rviz or the experiment runner) seeds the first window.
-            rospy.Subscriber("initialpose", PoseWithCovarianceStamped, self._on_pose, queue_size=1)
+            rospy.Subscriber("initialpose", PoseWithCovarianceStamped, self._on_initial_pose, queue_size=1)
         else:
             rospy.Subscriber("pose", PoseWithCovarianceStamped, self._on_pose, queue_size=1)
         if self.config.lost.max_half_side > 0.0:
@@ -136,6 +136,13 @@ class MapProviderNode:
     def _on_pose(self, msg: PoseWithCovarianceStamped) -> None:
         if self._frame_ok(msg.header.frame_id):
             self._offer(pose_sample(msg.pose.pose, msg.header.stamp))
+
+    def _on_initial_pose(self, msg: PoseWithCovarianceStamped) -> None:
+        """A pose given by hand (rviz) ends a search's window: the window goes to that pose."""
+        with self._pose_ready:
+            self._search = None
+            self._tracking_again = True
+        self._on_pose(msg)
 
     def _on_localizer_status(self, msg: NdtStatus) -> None:
         with self._pose_ready:
