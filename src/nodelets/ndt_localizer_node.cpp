@@ -2,8 +2,15 @@
 // nodelet can never differ. Remappings and private parameters apply as for any node.
 #include <nodelet/loader.h>
 #include <ros/ros.h>
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 int main(int argc, char** argv) {
+#if defined(__GLIBC__)
+  // One malloc arena for the whole process, before any thread starts (docs/localizer.md, "Memory").
+  mallopt(M_ARENA_MAX, 1);
+#endif
   ros::init(argc, argv, "ndt_localizer");
   nodelet::Loader loader;
   nodelet::M_string remappings(ros::names::getRemappings());
