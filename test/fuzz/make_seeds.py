@@ -1,6 +1,7 @@
 """Writes the seed corpora of the fuzz targets into test/fuzz/seeds/<target>/ (committed; each file a few
 hundred bytes): PCD files in every encoding and layout the readers accept (padding, float64, COUNT > 1,
-organised clouds, NaN points), the first points of the real scans committed in test/data, tile indexes, and PointCloud2 layouts. Usage: python3 test/fuzz/make_seeds.py"""
+organised clouds, NaN points), the first points of the real scans committed in test/data, tile indexes, and
+PointCloud2 layouts. Usage: python3 test/fuzz/make_seeds.py"""
 
 from __future__ import annotations
 
