@@ -41,9 +41,9 @@ from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array, xyz_rec
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
 from reference_check import check  # noqa: E402
+from shared_data import SHARED_REAL_DATA  # noqa: E402
 
-SHARED = Path(os.environ.get("GPL_SHARED_DATA") or ROOT.parent / "shared" / "data" / "real")
-MULRAN = SHARED / "mulran_riverside02"
+MULRAN = SHARED_REAL_DATA / "mulran_riverside02"
 MULRAN_SCANS = range(50, 216)
 SUCCESS_M, SUCCESS_DEG = 0.3, 1.0
 

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import shutil
 import subprocess
 import sys
@@ -38,14 +37,14 @@ from pathlib import Path
 import numpy as np
 import rosbag
 from reference_check import check
+from shared_data import SHARED_REAL_DATA
 
 from grid_puzzle_localization.evaluation.tracking import LOST_DEG, LOST_M, tracking
 from grid_puzzle_localization.evaluation.trajectory import read_tum
 from grid_puzzle_localization.experiment.scenario import read_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED = Path(os.environ.get("GPL_SHARED_DATA") or ROOT.parent / "shared" / "data" / "real")
-MULRAN = SHARED / "mulran_riverside02"
+MULRAN = SHARED_REAL_DATA / "mulran_riverside02"
 GPM = [sys.executable, str(ROOT / "scripts" / "gpm")]
 MODES = ("global", "grid_puzzle")
 GAPS = ["--gap", "15", "2", "--gap", "30", "4", "--gap", "45", "8"]

@@ -5,14 +5,15 @@ larger store ($GPL_SHARED_DATA, else ../shared/data/real beside the clone); a te
 saying so, when it is absent.
 """
 
-import os
+import sys
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 TEST_DATA = ROOT / "test" / "data"
-SHARED_REAL_DATA = Path(os.environ.get("GPL_SHARED_DATA") or ROOT.parent / "shared" / "data" / "real")
+sys.path.insert(0, str(ROOT / "tools"))
+from shared_data import SHARED_REAL_DATA  # noqa: E402
 
 
 @pytest.fixture(scope="session")

@@ -8,6 +8,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.provider.lost_search import LostSearchWindow, SearchRegion
 from grid_puzzle_localization.provider.window import (
     NO_SECTOR,
     PoseSample,
@@ -246,3 +247,18 @@ def test_window_is_the_same_everywhere_in_a_tile(i, j, fx1, fy1, fx2, fy2, theta
     w2 = compute_window((i + fx2) * s, (j + fy2) * s, theta, s, 3, 2)
     assert w1.bounds == w2.bounds
     assert w1.center == (i, j)
+
+
+def test_lost_search_window_grows_in_steps_up_to_the_cap_and_ends_once():
+    s = 2.0
+    lost = LostSearchWindow(max_half_side=30.0, reach=2.0, s=s)
+    wide = compute_window(5.3, 5.3, None, s, n=6, k=0)  # i, j -4..8
+    assert lost.cover(SearchRegion(5.3, 5.3, 0.0, 0.0), wide, wide) is None  # 2 m rounds up to 10 m: -3..7 inside
+    assert not lost.active
+    home = compute_window(5.3, 5.3, None, s, n=1, k=0)  # i, j 1..3
+    grown = lost.cover(SearchRegion(5.3, 5.3, 7.0, 0.0), home, home)  # 9 m rounds up to 10 m
+    assert grown.bounds == (-3, 7, -3, 7) and lost.active
+    assert lost.cover(SearchRegion(5.3, 5.3, 7.5, 0.0), home, grown) is None  # still 10 m: nothing new
+    capped = lost.cover(SearchRegion(5.3, 5.3, 95.0, 0.0), home, grown)  # 97 m, capped at 30 m
+    assert capped.bounds == (math.floor(-24.7 / s), math.floor(35.3 / s)) * 2
+    assert lost.end() and not lost.active and not lost.end()

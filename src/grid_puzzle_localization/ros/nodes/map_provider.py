@@ -21,12 +21,10 @@ can recover.
 
 from __future__ import annotations
 
-import math
 import os
 import sys
 import threading
 import time
-from dataclasses import dataclass
 
 import rospy
 from geometry_msgs.msg import PoseWithCovarianceStamped
@@ -36,25 +34,15 @@ from std_srvs.srv import Trigger, TriggerResponse
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.msg import NdtStatus, ProviderStatus, TileDelta
 from grid_puzzle_localization.provider.config import ProviderConfig, load_config
+from grid_puzzle_localization.provider.lost_search import LostSearchWindow, SearchRegion
 from grid_puzzle_localization.provider.tile_references import TileReferences
-from grid_puzzle_localization.provider.window import PoseSample, Window, WindowTracker, window_covering
+from grid_puzzle_localization.provider.window import PoseSample, Window, WindowTracker
 from grid_puzzle_localization.ros.msgs.map_cloud_publisher import MapCloudPublisher
 from grid_puzzle_localization.ros.msgs.provider import pose_sample, provider_status, stamped, tile_delta
 from grid_puzzle_localization.tiles.directory import open_tile_directory
 from grid_puzzle_localization.util.malloc_tuning import limit_arenas, pin_mmap_threshold
 
 WARN_PERIOD = 5.0  # [s] throttle of repeated warnings (off the map, wrong frame)
-SEARCH_STEP = 10.0  # [m] the window serving a search grows in steps of this (a delta every few scans, not each)
-
-
-@dataclass(frozen=True)
-class SearchRegion:
-    """Where the lost localizer searches: centre [m] (map frame), radius [m], stamp [s]."""
-
-    x: float
-    y: float
-    radius: float
-    t: float
 
 
 class ResetOnSubscribe(rospy.SubscribeListener):
@@ -92,7 +80,7 @@ class MapProviderNode:
         self._latest: PoseSample | None = None
         self._search: SearchRegion | None = None  # the lost localizer's latest search region
         self._tracking_again = False  # the localizer tracks again after a loss
-        self._searching = False  # the window serves the localizer's search, not the pose
+        self._lost = LostSearchWindow(self.config.lost.max_half_side, self.tracker.config.n * self.s, self.s)
         self._pose_ready = threading.Condition()
 
         self.delta_pub = rospy.Publisher(
@@ -183,14 +171,13 @@ class MapProviderNode:
                     self._pose_ready.wait(0.5)
                 pose, self._latest = self._latest, None
                 search, self._search = self._search, None
-                if self._tracking_again and self._searching:
-                    self._searching = False
+                if self._tracking_again and self._lost.end():
                     self.tracker.restart()  # the next pose is measured again: the window goes back to it
                 self._tracking_again = False
             self._follow_directory()
             if search is not None:
                 self._cover_search(search)
-            if pose is None or self._searching:
+            if pose is None or self._lost.active:
                 continue  # while the localizer is lost its pose is a prediction: the search's window stays
             start = time.perf_counter()
             window = self.tracker.update(pose)
@@ -198,15 +185,13 @@ class MapProviderNode:
                 self._serve(pose, window, start)
 
     def _cover_search(self, region: SearchRegion) -> None:
-        """Grows the window to the square of half side (search radius + n s, rounded up to SEARCH_STEP) around
-        the search centre, at most lost/max_half_side."""
+        """Serves the window that holds the lost localizer's search region (provider/lost_search.py)."""
         start = time.perf_counter()
-        reach = region.radius + self.tracker.config.n * self.s
-        half_side = min(math.ceil(reach / SEARCH_STEP) * SEARCH_STEP, self.config.lost.max_half_side)
-        window = window_covering(self.tracker.window, region.x, region.y, half_side, self.s)
-        if self._window is not None and window.bounds == self._window.bounds:
+        first = not self._lost.active
+        window = self._lost.cover(region, self.tracker.window, self._window)
+        if window is None:
             return
-        if not self._searching:
+        if first:
             rospy.logwarn(
                 "the localizer is lost: the window grows to %.0f m x %.0f m around (%.1f, %.1f) m for its search",
                 (window.i_max - window.i_min + 1) * self.s,
@@ -214,7 +199,6 @@ class MapProviderNode:
                 region.x,
                 region.y,
             )
-        self._searching = True
         self._serve(PoseSample(region.x, region.y, region.t), window, start)
 
     def _follow_directory(self) -> None:
