@@ -16,6 +16,8 @@ from grid_puzzle_localization.evaluation.metrics import (
 )
 from grid_puzzle_localization.evaluation.resources import (
     compare_to_baseline,
+    map_memory,
+    map_memory_ratios,
     mode_resources,
     protocol_processes,
     reduction,
@@ -199,6 +201,40 @@ def test_protocols_and_reductions():
     assert reduction(0.0, 1.0)["relative_percent"] is None
     with pytest.raises(UserError, match="map_provider"):
         protocol_processes("grid_puzzle", {"localizer": "/loc"}, grid_log, "paper")
+
+
+def test_map_memory_is_rss_over_the_empty_map_run():
+    roles_g = {"localizer": "/loc", "map_provider": "/prov"}
+    full = {
+        "global": fake_log({"/loc": {"cpu_percent": [1, 1], "rss_bytes": [300e6, 340e6]}}),
+        "grid_puzzle": fake_log(
+            {
+                "/loc": {"cpu_percent": [1, 1], "rss_bytes": [60e6, 70e6]},
+                "/prov": {"cpu_percent": [1, 1], "rss_bytes": [52e6, 52e6]},
+            }
+        ),
+    }
+    empty = {
+        "global": fake_log({"/loc": {"cpu_percent": [1, 1, 1], "rss_bytes": [20e6, 20e6, 20e6]}}),
+        "grid_puzzle": fake_log(
+            {
+                "/loc": {"cpu_percent": [1], "rss_bytes": [25e6]},
+                "/prov": {"cpu_percent": [1], "rss_bytes": [50e6]},
+            }
+        ),
+    }
+    memory = {mode: map_memory(mode, roles_g, full[mode], empty[mode]) for mode in full}
+    assert memory["global"]["paper"]["map_bytes"] == pytest.approx(320e6 - 20e6)
+    loc = memory["grid_puzzle"]["processes"]["/loc"]
+    assert (loc["rss_bytes_mean"], loc["empty_map_rss_bytes_mean"], loc["map_bytes"]) == (65e6, 25e6, 40e6)
+    assert memory["grid_puzzle"]["paper"]["map_bytes"] == pytest.approx(40e6 + 2e6)
+    assert memory["grid_puzzle"]["paper"]["processes"] == ["/loc", "/prov"]
+    ratios = map_memory_ratios(memory)
+    assert ratios["grid_puzzle"]["paper"] == pytest.approx(42e6 / 300e6) and "global" not in ratios
+    # A process the empty-map run did not see has no map memory, nor has a protocol that counts it.
+    partial = map_memory("grid_puzzle", roles_g, full["grid_puzzle"], empty["global"])
+    assert partial["processes"]["/prov"]["map_bytes"] is None and partial["paper"]["map_bytes"] is None
+    assert map_memory_ratios({"global": memory["global"], "grid_puzzle": partial})["grid_puzzle"]["paper"] is None
 
 
 def test_paper_figures_reproduce_with_reduction():

@@ -85,9 +85,11 @@ def test_fusion_reaches_the_localizer_launch(tmp_path):
     d = scenario_dir(tmp_path)
     cfg = config_from_args(build_parser().parse_args(["experiment", str(d), "-o", "out", "--fusion", "sliding_window"]))
     cfg.check()
-    assert launch_args(cfg, "global", None, [0.0] * 6)["fusion"] == "sliding_window"
+    assert launch_args(cfg, "global", cfg.global_map, None, [0.0] * 6)["fusion"] == "sliding_window"
     default = config_from_args(build_parser().parse_args(["experiment", str(d), "-o", "out"]))
-    assert default.fusion is None and "fusion" not in launch_args(default, "global", None, [0.0] * 6)
+    assert default.fusion is None and "fusion" not in launch_args(
+        default, "global", default.global_map, None, [0.0] * 6
+    )
 
 
 def test_unknown_fusion_is_refused(tmp_path):

@@ -28,6 +28,7 @@ def run(tmp_path_factory):
     sim = ["simulate", "courtyard", "--scale", "0.2", "--duration", "6", "--seed", "2", "-o", str(scenario), "--quiet"]
     subprocess.run([sys.executable, str(GPM), *sim], check=True)
     argv = ["experiment", str(scenario), "-o", str(out), "--preset", "demo", "--interval", "0.25", "--settle", "1.5"]
+    argv += ["--empty-map-seconds", "3"]
     assert main(argv) == 0
     return scenario, out
 
@@ -68,6 +69,22 @@ def test_modes_agree_within_5_cm_and_track_ground_truth(run):
     paper = summary["modes"]["grid_puzzle"]["resources"]["paper"]
     assert paper["processes"] == ["/localizer_manager", "/grid_puzzle_map_provider"]
     assert np.isfinite(paper["cpu_percent"]["mean"]) and paper["rss_bytes"]["mean"] > 10e6
+
+
+def test_map_memory_is_measured_against_an_empty_map(run):
+    _scenario, out = run
+    summary = read_json(out / "summary.json")
+    for mode in ("global", "grid_puzzle"):
+        log = read_csv(out / mode / "empty_map" / "monitor.csv")
+        assert "/localizer_manager" in log.names and len(log) >= 4
+        memory = summary["modes"][mode]["map_memory"]["processes"]["/localizer_manager"]
+        # The same process with the map's voxels holds more than with none; its floor is a roscpp process.
+        assert memory["empty_map_rss_bytes_mean"] > 10e6 and memory["map_bytes"] > 0.5e6, mode
+        # The empty map's localizer matched nothing: no odometry was recorded.
+        assert not (out / mode / "empty_map" / "trajectory.tum").exists()
+    ratio = summary["map_memory_ratios"]["grid_puzzle"]["paper"]
+    assert ratio is not None and ratio > 0
+    assert "### Map memory" in (out / "report.md").read_text()
 
 
 def test_no_process_is_left_running(run):

@@ -64,6 +64,7 @@ def experiment(tmp_path_factory):
         rate=2.0,
         monitor_interval_s=0.2,
         settle_s=1.0,
+        empty_map_s=0.0,  # the empty-map runs are the integration test's (test_experiment_integration.py)
         launch_file=RELAY_LAUNCH,
         scenario_name="relay",
     )

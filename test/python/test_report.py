@@ -56,6 +56,19 @@ def experiment(tmp_path):
             {"/ndt_localizer": 100.0, "/provider": 60.0, "/manager": 20.0},
         ),
     )
+    # The same launches against an empty map (the floors the map memory subtracts).
+    write_csv(
+        tmp_path / "global" / "empty_map" / "monitor.csv",
+        synthetic_log({"/ndt_localizer": 1.0, "/manager": 1.0}, {"/ndt_localizer": 20.0, "/manager": 19.0}, n=8),
+    )
+    write_csv(
+        tmp_path / "grid_puzzle" / "empty_map" / "monitor.csv",
+        synthetic_log(
+            {"/ndt_localizer": 1.0, "/provider": 1.0, "/manager": 1.0},
+            {"/ndt_localizer": 25.0, "/provider": 50.0, "/manager": 20.0},
+            n=8,
+        ),
+    )
     storage = {
         "global_map": {
             "files": 1,
@@ -111,6 +124,11 @@ def test_report_figures_match_closed_form(experiment):
     assert red["cpu_percent"]["mean"]["absolute"] == pytest.approx(-20.0)
     assert red["rss_bytes"]["mean"]["relative_percent"] == pytest.approx(100 * (160 - 300) / 300)
     assert on_disk["paper"]["urban"]["tile_files"] == 47480
+    # Map memory: mean RSS minus the empty-map run's, per process and summed per protocol.
+    assert on_disk["modes"]["global"]["map_memory"]["paper"]["map_bytes"] == (300 - 20) * MIB
+    assert on_disk["modes"]["global"]["map_memory"]["total"]["map_bytes"] == (300 - 20 + 20 - 19) * MIB
+    assert on_disk["modes"]["grid_puzzle"]["map_memory"]["paper"]["map_bytes"] == (100 - 25 + 60 - 50) * MIB
+    assert on_disk["map_memory_ratios"]["grid_puzzle"]["paper"] == pytest.approx(85 / 280)
 
 
 def test_report_markdown_and_plots_parse(experiment):
@@ -122,6 +140,9 @@ def test_report_markdown_and_plots_parse(experiment):
     assert "| Memory change | -140.0 MiB (-46.7 %) | -55.0 MB (-33.1 %) | -316.3 MB (-62.1 %) |" in report
     assert "| Trajectory RMSE, grid puzzle vs global [m] | 0.0300 | 0.0433 | 0.0677 |" in report
     assert "| Tile files | 250 | 8,282 | 47,480 |" in report
+    assert "| grid puzzle | /provider | 60.0 | 50.0 | 10.0 | |" in report
+    assert "| grid puzzle | paper protocol | | | 85.0 | 0.30 x |" in report
+    assert "| global map | paper protocol | | | 280.0 | 1.00 x |" in report
     assert "| grid puzzle tiles | 250 | 1,075,000 | 1,000,000 | 75,000 | 25,000 | – | – |" in report
     for name in ("cpu", "memory", "trajectories", "errors"):
         assert f"(plots/{name}.png)" in report

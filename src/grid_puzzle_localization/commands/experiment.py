@@ -70,6 +70,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="wait after start-up and after playback [s] (default %(default)s)",
     )  # fmt: skip
     parser.add_argument(
+        "--empty-map-seconds", type=float, default=ExperimentConfig.empty_map_s,
+        help="seconds of the bag each mode also plays against an empty map, whose RSS the report subtracts "
+        "for the map memory; 0 = skip (default %(default)s)",
+    )  # fmt: skip
+    parser.add_argument(
         "--max-time-diff", type=float, default=ExperimentConfig.max_time_diff_s,
         help="pose association tolerance [s] (default %(default)s)",
     )  # fmt: skip
@@ -106,6 +111,7 @@ def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
         monitor_interval_s=args.interval,
         max_time_diff_s=args.max_time_diff,
         settle_s=args.settle,
+        empty_map_s=args.empty_map_seconds,
         ndt_threads=args.ndt_threads,
         fusion=args.fusion,
         initial_pose=list(args.initial_pose) if args.initial_pose else None,

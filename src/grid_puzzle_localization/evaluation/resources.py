@@ -5,7 +5,10 @@
 - ``total``: every process of the mode (nodelet managers, provider, helpers).
 
 CPU is in percent of one core; memory in bytes (RSS as psutil reports it, the paper's figure; PSS
-where available, which does not double-count pages shared between the summed processes)."""
+where available, which does not double-count pages shared between the summed processes).
+
+Map memory is what the map costs a process: its mean RSS minus its mean RSS in a run of the same launch
+against an empty map (the process's floor: libraries, ROS, scan buffers)."""
 
 from __future__ import annotations
 
@@ -83,4 +86,40 @@ def compare_to_baseline(resources: Mapping[str, Mapping], baseline: str = "globa
             }
             for protocol in PROTOCOLS
         }
+    return out
+
+
+def map_memory(mode: str, roles: Mapping[str, str], log: MonitorLog, empty_map: MonitorLog) -> dict:
+    """Per process and per protocol: mean RSS, mean RSS of the empty-map run, and their difference
+    (``map_bytes``; None for a process the empty-map run did not see)."""
+    processes = {}
+    for name in log.names:
+        full = describe(log.sum("rss_bytes", [name]))["mean"]
+        empty = describe(empty_map.sum("rss_bytes", [name]))["mean"] if name in empty_map.names else None
+        processes[name] = {
+            "rss_bytes_mean": full,
+            "empty_map_rss_bytes_mean": empty,
+            "map_bytes": None if full is None or empty is None else full - empty,
+        }
+    out: dict = {"processes": processes}
+    for protocol in PROTOCOLS:
+        names = protocol_processes(mode, roles, log, protocol)
+        parts = [processes[n]["map_bytes"] for n in names]
+        out[protocol] = {"processes": names, "map_bytes": None if None in parts else sum(parts)}
+    return out
+
+
+def map_memory_ratios(map_memories: Mapping[str, Mapping], baseline: str = "global") -> dict[str, dict]:
+    """For each non-baseline mode and protocol: its map memory over the baseline's (None when either is
+    missing or the baseline's is not positive)."""
+    base = map_memories.get(baseline)
+    out: dict[str, dict] = {}
+    for mode, mem in map_memories.items():
+        if mode == baseline:
+            continue
+        out[mode] = {}
+        for protocol in PROTOCOLS:
+            b = None if base is None else base[protocol]["map_bytes"]
+            v = mem[protocol]["map_bytes"]
+            out[mode][protocol] = v / b if b is not None and v is not None and b > 0 else None
     return out

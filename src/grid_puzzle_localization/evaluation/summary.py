@@ -11,7 +11,12 @@ import numpy as np
 
 from grid_puzzle_localization.evaluation.metrics import PairedErrors, interpolated_errors, paired_errors
 from grid_puzzle_localization.evaluation.paper import PAPER_FIGURES
-from grid_puzzle_localization.evaluation.resources import compare_to_baseline, mode_resources
+from grid_puzzle_localization.evaluation.resources import (
+    compare_to_baseline,
+    map_memory,
+    map_memory_ratios,
+    mode_resources,
+)
 from grid_puzzle_localization.evaluation.scan_times import summarize_scan_times
 from grid_puzzle_localization.evaluation.trajectory import Trajectory
 from grid_puzzle_localization.monitor.log import MonitorLog
@@ -29,6 +34,7 @@ class ModeRun:
     monitor: MonitorLog
     roles: Mapping[str, str]
     scan_times: np.ndarray | None = None  # (n, 3) rows of evaluation.scan_times, when recorded
+    empty_map: MonitorLog | None = None  # the monitor log of the same launch against an empty map, when run
 
 
 def _errors(errors: PairedErrors) -> dict:
@@ -45,11 +51,12 @@ def summarize_experiment(
     max_diff_s: float,
     scenario: Mapping,
 ) -> dict:
-    """The summary dictionary: per-mode resources (both protocols) and APE, the paper's RMSE between
-    the baseline (global) and every other mode, reductions against the baseline, storage, and the
-    paper's figures."""
+    """The summary dictionary: per-mode resources (both protocols), map memory (when an empty-map run was
+    made) and APE, the paper's RMSE between the baseline (global) and every other mode, reductions and map
+    memory ratios against the baseline, storage, and the paper's figures."""
     modes = {}
     for run in runs:
+        memory = None if run.empty_map is None else map_memory(run.mode, run.roles, run.monitor, run.empty_map)
         ape = None if ground_truth is None else interpolated_errors(ground_truth, run.trajectory, max_diff_s)
         modes[run.mode] = {
             "poses": len(run.trajectory),
@@ -59,6 +66,7 @@ def summarize_experiment(
             "ape": None if ape is None else _errors(ape),
             "events": [dataclasses.asdict(e) for e in run.monitor.events],
             "scan_time_ms": None if run.scan_times is None else summarize_scan_times(run.scan_times),
+            "map_memory": memory,
         }
     by_mode = {run.mode: run for run in runs}
     between = {}
@@ -68,6 +76,7 @@ def summarize_experiment(
             if run.mode != BASELINE_MODE:
                 between[f"{run.mode}_vs_{BASELINE_MODE}"] = _errors(paired_errors(base, run.trajectory, max_diff_s))
     resources = {mode: m["resources"] for mode, m in modes.items()}
+    map_memories = {mode: m["map_memory"] for mode, m in modes.items() if m["map_memory"] is not None}
     return {
         "scenario": dict(scenario),
         "max_time_diff_s": max_diff_s,
@@ -75,6 +84,7 @@ def summarize_experiment(
         "modes": modes,
         "between_modes": between,
         "reductions": compare_to_baseline(resources, BASELINE_MODE) if BASELINE_MODE in resources else {},
+        "map_memory_ratios": map_memory_ratios(map_memories, BASELINE_MODE),
         "storage": dict(storage) if storage is not None else None,
         "paper": PAPER_FIGURES,
     }

@@ -42,6 +42,7 @@ class NodeRoles:
 
 
 DEFAULT_MODES = ("global", "grid_puzzle")
+EMPTY_MAP_MODES = ("global", "grid_puzzle")  # the modes whose floor an empty-map run measures
 
 
 @dataclass
@@ -61,6 +62,7 @@ class ExperimentConfig:
     max_time_diff_s: float = 0.05  # pose association tolerance
     startup_timeout_s: float = 60.0
     settle_s: float = 2.0  # after the nodes are up, and after the bag ends
+    empty_map_s: float = 20.0  # [s] of the bag each mode also plays against an empty map (its floor); 0 = skip
     ndt_threads: int | None = None  # OpenMP threads of the NDT, 0 = all cores; None: the localizer's default
     fusion: str | None = None  # FUSIONS: pose tracking past the NDT match; None: the localizer's default
     initial_pose: list[float] | None = None  # x y z roll pitch yaw [m, rad]; None: first ground-truth pose
@@ -91,6 +93,8 @@ class ExperimentConfig:
             raise UserError(f"--ndt-threads must be >= 0, 0 = all cores (got {self.ndt_threads})")
         if self.fusion is not None and self.fusion not in FUSIONS:
             raise UserError(f"unknown fusion '{self.fusion}' (use {', '.join(FUSIONS)})")
+        if not self.empty_map_s >= 0:
+            raise UserError(f"--empty-map-seconds must be >= 0 (got {self.empty_map_s})")
         if not self.block_size_m > 0:
             raise UserError(f"--block-size must be > 0 m (got {self.block_size_m})")
         if self.initial_pose is None and self.ground_truth is None:

@@ -103,8 +103,17 @@ def run_node(
 
 
 def rosbag_play(
-    bag: str | os.PathLike, rate: float, env: Mapping[str, str], log_path: str | os.PathLike, delay_s: float = 1.0
+    bag: str | os.PathLike,
+    rate: float,
+    env: Mapping[str, str],
+    log_path: str | os.PathLike,
+    delay_s: float = 1.0,
+    duration_s: float | None = None,
 ) -> ManagedProcess:
-    """``rosbag play --clock`` at ``rate`` times real time, after ``delay_s`` for subscribers to connect."""
-    argv = ["rosbag", "play", "--clock", "--quiet", "-r", str(rate), "-d", str(delay_s), str(bag)]
+    """``rosbag play --clock`` at ``rate`` times real time, after ``delay_s`` for subscribers to connect;
+    the first ``duration_s`` seconds of the bag only, when given."""
+    argv = ["rosbag", "play", "--clock", "--quiet", "-r", str(rate), "-d", str(delay_s)]
+    if duration_s is not None:
+        argv += ["-u", str(duration_s)]
+    argv.append(str(bag))
     return ManagedProcess("rosbag play", argv, env, log_path)

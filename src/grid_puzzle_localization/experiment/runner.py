@@ -16,13 +16,15 @@ from scipy.spatial.transform import Rotation
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation.trajectory import read_tum
-from grid_puzzle_localization.experiment.config import ExperimentConfig
+from grid_puzzle_localization.experiment.config import EMPTY_MAP_MODES, ExperimentConfig
+from grid_puzzle_localization.experiment.maps import ensure_empty_map
 from grid_puzzle_localization.experiment.processes import ManagedProcess, wait_for
 from grid_puzzle_localization.experiment.ros_stack import RosCore, rosbag_play, roslaunch, run_node
 from grid_puzzle_localization.monitor.log import write_csv
 from grid_puzzle_localization.monitor.sampler import Monitor
 from grid_puzzle_localization.monitor.stats import summarize
 from grid_puzzle_localization.report.build import (
+    EMPTY_MAP_DIR,
     MONITOR_CSV,
     MONITOR_JSON,
     SCAN_TIMES,
@@ -54,12 +56,14 @@ def initial_pose_from(trajectory_path: Path) -> list[float]:
     return [*map(float, gt.xyz[0]), float(roll), float(pitch), float(yaw)]
 
 
-def launch_args(cfg: ExperimentConfig, mode: str, tiles: Path | None, initial_pose: list[float]) -> dict[str, object]:
+def launch_args(
+    cfg: ExperimentConfig, mode: str, global_map: Path, tiles: Path | None, initial_pose: list[float]
+) -> dict[str, object]:
     args: dict[str, object] = {
         "mode": mode,
         "use_sim_time": "true",
         "initial_pose": "[" + ", ".join(f"{v:.9g}" for v in initial_pose) + "]",
-        "map": cfg.global_map.resolve(),
+        "map": global_map.resolve(),
         "n": cfg.window.n,
         "k": cfg.window.k,
     }
@@ -127,9 +131,21 @@ def wait_for_playback(player: ManagedProcess, launch: ManagedProcess, bag: Path)
         raise UserError(f"rosbag play failed on {bag}; see {player.log_path}")
 
 
-def run_mode(cfg: ExperimentConfig, mode: str, tiles: Path | None, initial_pose: list[float]) -> ModeOutcome:
-    """One mode, start to clean shutdown; writes OUT/<mode>/{trajectory.tum, monitor.csv, monitor.json, logs}."""
-    out = cfg.out_dir / mode
+@dataclass(frozen=True)
+class ModeInputs:
+    """What one run of a mode plays against, and for how long."""
+
+    global_map: Path
+    tiles: Path | None  # grid_puzzle mode's tile directory
+    out: Path  # the run's directory (emptied first)
+    duration_s: float | None = None  # seconds of the bag to play; None: all of it
+    record: bool = True  # record the trajectory (and require one)
+
+
+def run_mode(cfg: ExperimentConfig, mode: str, inputs: ModeInputs, initial_pose: list[float]) -> ModeOutcome:
+    """One run of a mode, start to clean shutdown; writes OUT/{trajectory.tum, monitor.csv, monitor.json, logs}
+    (the trajectory only when recording)."""
+    out = inputs.out
     if out.exists():
         shutil.rmtree(out)
     out.mkdir(parents=True)
@@ -140,21 +156,22 @@ def run_mode(cfg: ExperimentConfig, mode: str, tiles: Path | None, initial_pose:
         say(mode, "starting roscore and roslaunch")
         core = RosCore(out / "logs", cfg.startup_timeout_s)
         started.append(core.process)
-        launch = roslaunch(
-            cfg.launch_file, launch_args(cfg, mode, tiles, initial_pose), core.env, out / "logs" / "roslaunch.log"
-        )
+        args = launch_args(cfg, mode, inputs.global_map, inputs.tiles, initial_pose)
+        launch = roslaunch(cfg.launch_file, args, core.env, out / "logs" / "roslaunch.log")
         started.append(launch)
         wanted = set(roles.values())
         wait_for(lambda: wanted <= core.nodes(), cfg.startup_timeout_s, f"the nodes {sorted(wanted)}", launch)
         wait_for(lambda: core.subscribers("/points"), cfg.startup_timeout_s, "a subscriber of /points", launch)
-        started.append(start_recorder(cfg, core, out, initial_pose))
+        if inputs.record:
+            started.append(start_recorder(cfg, core, out, initial_pose))
         time.sleep(cfg.settle_s)
         launch.remember_descendants()
         processes = sorted(core.nodes() - {"/rosout", cfg.roles.recorder})
         monitor = Monitor([node_target(name, core.master_uri) for name in processes], cfg.monitor_interval_s)
         monitor.start()
         say(mode, f"monitoring {', '.join(processes)}; playing {cfg.bag.name} at {cfg.rate}x")
-        started.append(rosbag_play(cfg.bag.resolve(), cfg.rate, core.env, out / "logs" / "rosbag_play.log"))
+        log_path = out / "logs" / "rosbag_play.log"
+        started.append(rosbag_play(cfg.bag.resolve(), cfg.rate, core.env, log_path, duration_s=inputs.duration_s))
         wait_for_playback(started[-1], launch, cfg.bag)
         time.sleep(cfg.settle_s)  # the last scans are still being matched
         log = monitor.stop()
@@ -168,9 +185,17 @@ def run_mode(cfg: ExperimentConfig, mode: str, tiles: Path | None, initial_pose:
         killed, stray = _stop_all(started)
     if stray:
         raise UserError(f"mode {mode}: processes {stray} survived SIGKILL; stop them by hand")
-    if not (out / TRAJECTORY).is_file() or len(read_tum(out / TRAJECTORY)) == 0:
+    if inputs.record and (not (out / TRAJECTORY).is_file() or len(read_tum(out / TRAJECTORY)) == 0):
         raise UserError(f"mode {mode}: the localizer published no odometry; see {out / 'logs' / 'roslaunch.log'}")
     return ModeOutcome(mode, core.master_uri, roles, processes, killed, stray)
+
+
+def run_empty_map(cfg: ExperimentConfig, mode: str, initial_pose: list[float]) -> ModeOutcome:
+    """The mode's launch against an empty map for the first ``cfg.empty_map_s`` seconds of the bag, into
+    OUT/<mode>/empty_map/: the floor that the report subtracts to get each process's map memory."""
+    global_map, tiles = ensure_empty_map(cfg.out_dir / EMPTY_MAP_DIR, cfg.window.grid_size_m)
+    inputs = ModeInputs(global_map, tiles, cfg.out_dir / mode / EMPTY_MAP_DIR, cfg.empty_map_s, record=False)
+    return run_mode(cfg, mode, inputs, initial_pose)
 
 
 def run_experiment(cfg: ExperimentConfig, tiles: Path | None, storage: dict | None) -> dict:
@@ -178,7 +203,12 @@ def run_experiment(cfg: ExperimentConfig, tiles: Path | None, storage: dict | No
     cfg.check()
     cfg.out_dir.mkdir(parents=True, exist_ok=True)
     initial_pose = cfg.initial_pose if cfg.initial_pose is not None else initial_pose_from(cfg.ground_truth)
-    outcomes = [run_mode(cfg, mode, tiles if mode == "grid_puzzle" else None, initial_pose) for mode in cfg.modes]
+    outcomes = []
+    for mode in cfg.modes:
+        inputs = ModeInputs(cfg.global_map, tiles if mode == "grid_puzzle" else None, cfg.out_dir / mode)
+        outcomes.append(run_mode(cfg, mode, inputs, initial_pose))
+        if cfg.empty_map_s > 0 and mode in EMPTY_MAP_MODES:
+            outcomes.append(run_empty_map(cfg, mode, initial_pose))
     scenario = {
         "name": cfg.scenario_name,
         "preset": cfg.preset,

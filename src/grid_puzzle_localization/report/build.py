@@ -4,6 +4,7 @@ OUT/run.json                    scenario, modes, roles per mode, ground truth pa
 OUT/<mode>/trajectory.tum       the localizer's odometry (TUM)
 OUT/<mode>/monitor.csv, .json   the resource monitor's samples and summary (with events)
 OUT/<mode>/scan_times.csv       the localizer's per-scan times (optional)
+OUT/<mode>/empty_map/monitor.csv  the same launch against an empty map, for the map memory (optional)
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ TRAJECTORY = "trajectory.tum"
 MONITOR_CSV = "monitor.csv"
 MONITOR_JSON = "monitor.json"
 SCAN_TIMES = "scan_times.csv"
+EMPTY_MAP_DIR = "empty_map"
 
 
 @dataclass
@@ -77,7 +79,9 @@ def load_mode(out_dir: Path, mode: str, roles: dict[str, str]) -> ModeRun:
     if (d / MONITOR_JSON).exists():
         log.events = [Event(**e) for e in read_json(d / MONITOR_JSON).get("events", [])]
     scan_times = read_scan_times(d / SCAN_TIMES) if (d / SCAN_TIMES).exists() else None
-    return ModeRun(mode, read_tum(d / TRAJECTORY), log, roles, scan_times)
+    empty_csv = d / EMPTY_MAP_DIR / MONITOR_CSV
+    empty_map = read_csv(empty_csv) if empty_csv.exists() else None
+    return ModeRun(mode, read_tum(d / TRAJECTORY), log, roles, scan_times, empty_map)
 
 
 def build_report(out_dir: str | os.PathLike) -> dict:

@@ -126,6 +126,33 @@ def reductions_table(summary: Mapping) -> list[str]:
     return lines
 
 
+def map_memory_table(summary: Mapping) -> list[str]:
+    """Per mode and process: mean RSS, mean RSS against an empty map, their difference (the map's memory),
+    then each protocol's sum and its ratio to the global map's. Empty when no empty-map run was made."""
+    ratios = summary.get("map_memory_ratios", {})
+    lines = [
+        "| mode | process | RSS mean [MiB] | RSS with an empty map [MiB] | map memory [MiB] | vs global map |",
+        "|---|---|---:|---:|---:|---:|",
+    ]
+    for mode, m in summary["modes"].items():
+        memory = m.get("map_memory")
+        if memory is None:
+            continue
+        title = MODE_TITLES.get(mode, mode)
+        for name, p in memory["processes"].items():
+            lines.append(
+                f"| {title} | {name} | {_mib(p['rss_bytes_mean'])} | {_mib(p['empty_map_rss_bytes_mean'])} "
+                f"| {_mib(p['map_bytes'])} | |"
+            )
+        for protocol in ("paper", "total"):
+            ratio = 1.0 if mode == summary["baseline_mode"] else ratios.get(mode, {}).get(protocol)
+            lines.append(
+                f"| {title} | {protocol} protocol | | | {_mib(memory[protocol]['map_bytes'])} "
+                f"| {_num(ratio, '.2f', ' x')} |"
+            )
+    return lines if len(lines) > 2 else []
+
+
 def accuracy_table(summary: Mapping) -> list[str]:
     lines = [
         "| trajectory | reference | pairs | transl. RMSE [m] | transl. median [m] | transl. max [m] "
@@ -199,6 +226,21 @@ def storage_table(summary: Mapping) -> list[str]:
     return lines
 
 
+def map_memory_section(summary: Mapping) -> list[str]:
+    table = map_memory_table(summary)
+    if not table:
+        return []
+    return [
+        "### Map memory",
+        "",
+        *table,
+        "",
+        "A process's map memory is its mean RSS minus its mean RSS when the same launch plays the start of the",
+        "bag against an empty map (its floor: libraries, ROS, scan buffers).",
+        "",
+    ]
+
+
 def render_report(summary: Mapping) -> str:
     """The whole report.md."""
     sc = summary["scenario"]
@@ -227,6 +269,7 @@ def render_report(summary: Mapping) -> str:
         "",
         *reductions_table(summary),
         "",
+        *map_memory_section(summary),
         "## Accuracy",
         "",
         *accuracy_table(summary),
