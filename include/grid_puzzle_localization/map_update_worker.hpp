@@ -85,7 +85,7 @@ class MapUpdateWorker {
   /// Starts the worker thread. `params` must validate (throws std::invalid_argument otherwise); its
   /// `threads` is the OpenMP team of the updates, so a small value leaves cores to the scan thread.
   explicit MapUpdateWorker(const VoxelMapParams& params);
-  static constexpr double kDefaultTileCacheMb = 16.0;
+  static constexpr double kDefaultTileCacheMb = 4.0;
   /// Byte budget of the prefetch cache of tiles mode by reference [MiB] (>= 0; 0 = no prefetch). Thread-safe.
   void setTileCacheMb(double megabytes);
   /// Stops the worker after the change in progress; queued changes are dropped.
