@@ -17,7 +17,7 @@ PATH = DIRECTORY / INDEX_FILE
 def read_all() -> None:
     read_index_keys(PATH, chunk_bytes=64)  # small chunks: matches across chunk boundaries
     tiles = open_tile_directory(DIRECTORY)
-    assert len(tiles.keys) > 0
+    assert len(tiles) > 0
     index = load_tile_index(DIRECTORY)
     for entry in index.tiles:
         index.path(entry)

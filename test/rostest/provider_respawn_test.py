@@ -122,6 +122,14 @@ class ProviderRespawnTest(unittest.TestCase):
             self.x += 0.1
             time.sleep(0.1)
 
+    def test_without_map_cloud_the_node_never_loads_numpy(self):
+        # Tiles travel by reference and map_cloud is off: the node's memory stays at rospy's floor without numpy.
+        self.mirror.wait_for(lambda t, d: d.revision >= 3, "revision 3 (driving)")
+        with open(f"/proc/{node_pid('/provider', '/provider_respawn_test', WAIT)}/maps") as f:
+            mapped = f.read()
+        self.assertIn("python3", mapped)  # the right process
+        self.assertNotIn("numpy", mapped)
+
     def test_sigkill_mid_drive_is_respawned_and_resynced(self):
         _, before, keys = self.mirror.wait_for(lambda t, d: d.revision >= 5, "revision 5 (driving)")
         self.mirror.check_against_files(before, keys)

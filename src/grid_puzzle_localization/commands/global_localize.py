@@ -20,7 +20,7 @@ import numpy as np
 from grid_puzzle_localization.blocks.store import INDEX_FILE as BLOCK_INDEX
 from grid_puzzle_localization.blocks.store import read_block_index
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.tiles.directory import open_tile_directory
+from grid_puzzle_localization.tiles.directory import decode_key, open_tile_directory
 from grid_puzzle_localization.tiles.grid import tile_index
 
 PROGRAM = "global_localize"
@@ -76,15 +76,14 @@ def tile_files(path: Path, grid_size: float | None, center: tuple[float, float] 
         center = ((i_min + i_max + 1) * s / 2, (j_min + j_max + 1) * s / 2)
     x0, x1, y0, y1 = square(center, half)
     i0, i1, j0, j1 = tile_index(x0, s), tile_index(x1, s), tile_index(y0, s), tile_index(y1, s)
-    keys = directory.keys
-    keys = keys[(keys[:, 0] >= i0) & (keys[:, 0] <= i1) & (keys[:, 1] >= j0) & (keys[:, 1] <= j1)]
-    if len(keys) == 0:
+    keys = [decode_key(c) for c in directory.codes_in_box(i0, i1, j0, j1)]
+    if not keys:
         i_min, i_max, j_min, j_max = directory.bounds
         raise UserError(
             f"no tiles of {path} around the search centre ({center[0]:g}, {center[1]:g}); the tiles span"
             f" x {i_min * s:g}..{(i_max + 1) * s:g} m, y {j_min * s:g}..{(j_max + 1) * s:g} m: move --center"
         )
-    return MapFiles([directory.tile_path((int(i), int(j))) for i, j in keys], center)
+    return MapFiles([directory.tile_path(key) for key in keys], center)
 
 
 def block_files(path: Path, center: tuple[float, float] | None, half: float) -> MapFiles:

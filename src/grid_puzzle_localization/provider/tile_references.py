@@ -15,14 +15,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.provider.window import Window
-from grid_puzzle_localization.tiles.directory import TileDirectory, decode_key, open_tile_directory
+from grid_puzzle_localization.tiles.directory import Key, TileDirectory, decode_key, open_tile_directory
 from grid_puzzle_localization.tiling.index import INDEX_FILE
 
-Key = tuple[int, int]
 PREFETCH_MAX_TILES = 256  # bound of one prefetch list: the localizer's byte budget bounds what it reads
 
 
@@ -50,20 +47,22 @@ class TileReferences:
     def __init__(self, directory: TileDirectory) -> None:
         self.directory = directory
         self.revision = index_revision(directory.path)
-        self._loaded: set[int] = set()  # codes (tiles.directory.encode_keys) of the window's tiles
+        self._loaded: set[int] = set()  # codes (tiles.directory.encode_key) of the window's tiles
 
     def update(self, window: Window, ahead: Sequence[Window] = ()) -> ReferenceDelta:
         wanted_codes = self.directory.codes_in(window)
-        wanted = set(wanted_codes.tolist())
+        wanted = set(wanted_codes)
         removed = sorted(self._loaded - wanted)
-        added = [c for c in wanted_codes.tolist() if c not in self._loaded]
+        added = [c for c in wanted_codes if c not in self._loaded]
         self._loaded = wanted
         prefetch: list[int] = []
-        if ahead:
-            codes = np.concatenate([self.directory.codes_in(w) for w in ahead])
-            _, first = np.unique(codes, return_index=True)
-            codes = codes[np.sort(first)]  # unique, most likely window first
-            prefetch = codes[~np.isin(codes, wanted_codes)][:PREFETCH_MAX_TILES].tolist()
+        named = set(wanted)
+        for w in ahead:  # most likely window first
+            fresh = [c for c in self.directory.codes_in(w) if c not in named]
+            named.update(fresh)
+            prefetch += fresh[: PREFETCH_MAX_TILES - len(prefetch)]
+            if len(prefetch) == PREFETCH_MAX_TILES:
+                break
         return ReferenceDelta(
             [decode_key(c) for c in added], [decode_key(c) for c in removed], [decode_key(c) for c in prefetch]
         )

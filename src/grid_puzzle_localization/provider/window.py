@@ -15,7 +15,7 @@ Table I sectors are half-open intervals ``[lo, hi)`` in degrees, after normalisi
 sector 1, -20 deg = 340 deg is sector 0). Headings are compared in degrees rounded to 1e-9 deg, so
 ``math.radians(20)`` is on the boundary, not a rounding error below it.
 
-Pure Python (no ROS): the node and ``gpm window`` run this same code.
+Pure Python (no ROS, no numpy): the node and ``gpm window`` run this same code.
 """
 
 from __future__ import annotations
@@ -23,8 +23,6 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass
-
-import numpy as np
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.tiles.grid import tile_index
@@ -113,12 +111,9 @@ class Window:
     def bounds(self) -> tuple[int, int, int, int]:
         return self.i_min, self.i_max, self.j_min, self.j_max
 
-    def keys(self) -> np.ndarray:
-        """All (i, j) in the window as an (M, 2) int64 array, i-major."""
-        ii, jj = np.meshgrid(
-            np.arange(self.i_min, self.i_max + 1), np.arange(self.j_min, self.j_max + 1), indexing="ij"
-        )
-        return np.stack([ii.ravel(), jj.ravel()], axis=1).astype(np.int64)
+    def keys(self) -> list[tuple[int, int]]:
+        """All (i, j) in the window, i-major."""
+        return [(i, j) for i in range(self.i_min, self.i_max + 1) for j in range(self.j_min, self.j_max + 1)]
 
 
 def sector_of_degrees(deg: float) -> int:

@@ -1,76 +1,88 @@
 """Which tiles a tile directory holds: from its index file when present, otherwise by scanning the
-``<cx>_<cy>.pcd`` names. Keys are kept as one sorted (N, 2) int64 array (no Python object per tile), so
-a map of a million tiles costs 16 MB and a window query is two binary searches plus a slice."""
+``<cx>_<cy>.pcd`` names. Keys are kept as one sorted array of 64-bit codes (the ``array`` module: no
+Python object per tile), so a map of a million tiles costs 8 MB and a window query is two binary searches
+per row of tiles. No numpy: the provider node imports this module and stays at rospy's memory floor."""
 
 from __future__ import annotations
 
 import array
+import bisect
+import functools
 import math
 import os
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-
-import numpy as np
+from typing import Tuple
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.provider.window import Window
 from grid_puzzle_localization.tiles.grid import check_grid_size, parse_tile_stem, tile_filename
 from grid_puzzle_localization.tiling.index import FORMAT, INDEX_FILE, VERSION
+
+Key = Tuple[int, int]  # typing's: a runtime alias, and Python 3.8 (Noetic) has no tuple[...]
+_OFFSET = 1 << 31  # codes hold i + 2^31 and j + 2^31, so they sort as (i, j) do
+_LOW = (1 << 32) - 1
+
+
+def encode_key(i: int, j: int) -> int:
+    """One unsigned 64-bit code per tile index, ordered as the (i, j) pairs are (by i, then j). Exact for
+    |i|, |j| < 2^31 (s = 0.1 m still covers UTM northings); raises ValueError beyond."""
+    if not (-_OFFSET <= i < _OFFSET and -_OFFSET <= j < _OFFSET):
+        raise ValueError(f"tile index ({i}, {j}) is beyond +-2^31")
+    return ((i + _OFFSET) << 32) | (j + _OFFSET)
+
+
+def decode_key(code: int) -> Key:
+    return (code >> 32) - _OFFSET, (code & _LOW) - _OFFSET
+
+
+def sorted_codes(keys: Iterable[Key]) -> array.array:
+    return array.array("Q", sorted(encode_key(int(i), int(j)) for i, j in keys))
 
 
 @dataclass(frozen=True)
 class TileDirectory:
-    """The tiles of one directory. ``keys`` are the (i, j) indices sorted by i, then j."""
+    """The tiles of one directory. ``codes`` are their encode_key codes, sorted."""
 
     path: Path
     grid_size: float  # s [m]
-    keys: np.ndarray
+    codes: array.array
     source: str  # "index" or "scan"
     unparsable: tuple[str, ...] = field(default=())  # *.pcd names that are not tiles of side s
 
-    def tile_path(self, key: tuple[int, int]) -> Path:
+    def __len__(self) -> int:
+        return len(self.codes)
+
+    def tile_path(self, key: Key) -> Path:
         return self.path / tile_filename(key[0], key[1], self.grid_size)
 
-    def existing_in(self, window: Window) -> np.ndarray:
-        """The (M, 2) keys of existing tiles inside ``window``."""
-        lo = np.searchsorted(self.keys[:, 0], window.i_min, side="left")
-        hi = np.searchsorted(self.keys[:, 0], window.i_max, side="right")
-        band = self.keys[lo:hi]
-        return band[(band[:, 1] >= window.j_min) & (band[:, 1] <= window.j_max)]
+    def codes_in_box(self, i_min: int, i_max: int, j_min: int, j_max: int) -> list[int]:
+        """Codes of the existing tiles with i_min <= i <= i_max and j_min <= j <= j_max, sorted."""
+        i_min, i_max = max(i_min, self.bounds[0]), min(i_max, self.bounds[1])
+        out: list[int] = []
+        for i in range(i_min, i_max + 1):
+            lo = bisect.bisect_left(self.codes, encode_key(i, max(j_min, -_OFFSET)))
+            hi = bisect.bisect_right(self.codes, encode_key(i, min(j_max, _OFFSET - 1)), lo)
+            out.extend(self.codes[lo:hi])
+        return out
 
-    def codes_in(self, window: Window) -> np.ndarray:
-        """``existing_in`` as one int64 code per tile (see encode_keys)."""
-        return encode_keys(self.existing_in(window))
+    def codes_in(self, window) -> list[int]:
+        """Codes of the existing tiles inside ``window`` (anything with i_min, i_max, j_min, j_max)."""
+        return self.codes_in_box(window.i_min, window.i_max, window.j_min, window.j_max)
 
-    @property
+    def existing_in(self, window) -> list[Key]:
+        """The (i, j) keys of existing tiles inside ``window``, sorted."""
+        return [decode_key(c) for c in self.codes_in(window)]
+
+    @functools.cached_property
     def bounds(self) -> tuple[int, int, int, int]:
         """(i_min, i_max, j_min, j_max) over all tiles."""
-        return (
-            int(self.keys[:, 0].min()),
-            int(self.keys[:, 0].max()),
-            int(self.keys[:, 1].min()),
-            int(self.keys[:, 1].max()),
-        )
+        low = [c & _LOW for c in self.codes]
+        return decode_key(self.codes[0])[0], decode_key(self.codes[-1])[0], min(low) - _OFFSET, max(low) - _OFFSET
 
 
-def encode_keys(keys: np.ndarray) -> np.ndarray:
-    """One int64 per (i, j) row: i * 2^32 + (j mod 2^32), exact for |i|, |j| < 2^31 (s = 0.1 m still
-    covers UTM northings). Python ints of these codes are cheap set and dict keys."""
-    return (keys[:, 0] << 32) | (keys[:, 1] & 0xFFFFFFFF)
-
-
-def decode_key(code: int) -> tuple[int, int]:
-    j = code & 0xFFFFFFFF
-    return code >> 32, j - (1 << 32) if j >= 1 << 31 else j
-
-
-def sorted_keys(keys: np.ndarray) -> np.ndarray:
-    keys = np.asarray(keys, dtype=np.int64).reshape(-1, 2)
-    return keys[np.lexsort((keys[:, 1], keys[:, 0]))]
-
-
-def scan_tiles(path: Path, s: float) -> tuple[np.ndarray, tuple[str, ...]]:
+def scan_tiles(path: Path, s: float) -> tuple[array.array, tuple[str, ...]]:
     """Keys of the ``*.pcd`` files of ``path`` whose names parse as tiles of side ``s``, and the names
     that do not."""
     keys, bad = [], []
@@ -82,7 +94,7 @@ def scan_tiles(path: Path, s: float) -> tuple[np.ndarray, tuple[str, ...]]:
                 keys.append(parse_tile_stem(entry.name[: -len(".pcd")], s))
             except ValueError:
                 bad.append(entry.name)
-    return sorted_keys(np.array(keys, dtype=np.int64)), tuple(sorted(bad))
+    return sorted_codes(keys), tuple(sorted(bad))
 
 
 # Streaming scan of index.json (schema: tiling/index.py). A match must be followed by its delimiter
@@ -92,12 +104,12 @@ _HEADER = re.compile(rb'"(format|version|grid_size)"\s*:\s*("[^"\\]*"|[-+0-9.eE]
 _OVERLAP = 256  # [bytes] kept from the previous chunk: longer than any match
 
 
-def read_index_keys(path: Path, chunk_bytes: int = 1 << 20) -> tuple[float, np.ndarray]:
-    """Grid size [m] and tile keys of a tiler index, read in chunks: memory stays at one chunk plus
-    the keys, where ``json.loads`` (or ``tiling.load_tile_index``, which keeps a TileEntry per tile)
+def read_index_keys(path: Path, chunk_bytes: int = 1 << 20) -> tuple[float, array.array]:
+    """Grid size [m] and the sorted codes of the tile keys of a tiler index, read in chunks: memory stays at
+    one chunk plus the keys, where ``json.loads`` (or ``tiling.load_tile_index``, which keeps a TileEntry per tile)
     peaks at 30 to 135 MB for a 500 m x 700 m map at s = 2 m. Tile keys are the only ``"key"`` members
     of the schema; the test checks the result against ``load_tile_index``."""
-    keys = array.array("q")
+    codes = array.array("Q")
     header: dict[str, bytes] = {}
     try:
         with open(path, "rb") as f:
@@ -106,7 +118,7 @@ def read_index_keys(path: Path, chunk_bytes: int = 1 << 20) -> tuple[float, np.n
                 buf = tail + chunk
                 consumed = 0
                 for m in _KEY.finditer(buf):
-                    keys.extend((int(m[1]), int(m[2])))
+                    codes.append(encode_key(int(m[1]), int(m[2])))
                     consumed = m.end()
                 for m in _HEADER.finditer(buf):
                     header.setdefault(m[1].decode(), m[2])
@@ -116,9 +128,9 @@ def read_index_keys(path: Path, chunk_bytes: int = 1 << 20) -> tuple[float, np.n
         if "grid_size" not in header:
             raise ValueError("no grid_size")
         s = check_grid_size(float(header["grid_size"]))
-    except (OSError, ValueError, OverflowError, UserError) as err:  # OverflowError: a key beyond int64
+    except (OSError, ValueError, UserError) as err:  # ValueError: also a key beyond +-2^31
         raise UserError(f"{path}: not a readable tile index ({err}); re-run `gpm tile`") from None
-    return s, sorted_keys(np.frombuffer(keys, dtype=np.int64).copy())
+    return s, array.array("Q", sorted(codes))
 
 
 def open_tile_directory(path: str | os.PathLike, grid_size: float | None = None) -> TileDirectory:
@@ -129,23 +141,23 @@ def open_tile_directory(path: str | os.PathLike, grid_size: float | None = None)
     if not path.is_dir():
         raise UserError(f"tile directory {path} does not exist; write one with `gpm tile` or fix the path")
     if (path / INDEX_FILE).is_file():
-        s, keys = read_index_keys(path / INDEX_FILE)
+        s, codes = read_index_keys(path / INDEX_FILE)
         if grid_size is not None and not math.isclose(float(grid_size), s, rel_tol=1e-9):
             raise UserError(
                 f"grid size {grid_size} m disagrees with {path / INDEX_FILE}, which says {s} m;"
                 " leave the grid size unset (0) to use the index's"
             )
-        if len(keys) == 0:
+        if len(codes) == 0:
             raise UserError(f"tile directory {path}: its index lists no tiles; re-run `gpm tile` on a non-empty map")
-        return TileDirectory(path, s, keys, "index")
+        return TileDirectory(path, s, codes, "index")
     if grid_size is None:
         raise UserError(
             f"tile directory {path} has no index file, so the grid size is unknown;"
             " pass it (--grid-size / tiles/grid_size)"
         )
     s = check_grid_size(grid_size)
-    keys, bad = scan_tiles(path, s)
-    if len(keys) == 0:
+    codes, bad = scan_tiles(path, s)
+    if len(codes) == 0:
         hint = f" ({len(bad)} .pcd files with other names, e.g. {bad[0]})" if bad else ""
         raise UserError(f"tile directory {path} holds no tile files named <cx>_<cy>.pcd for s = {s} m{hint}")
-    return TileDirectory(path, s, keys, "scan", bad)
+    return TileDirectory(path, s, codes, "scan", bad)

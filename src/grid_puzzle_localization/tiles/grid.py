@@ -18,10 +18,12 @@ import functools
 import math
 import re
 from fractions import Fraction
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from grid_puzzle_localization.errors import UserError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 _NUMBER = r"-?\d+\.\d+"
 _STEM = re.compile(rf"^({_NUMBER})_({_NUMBER})$")
@@ -36,7 +38,12 @@ def check_grid_size(s: float) -> float:
 
 
 def tile_index(coord: np.ndarray | float, s: float) -> np.ndarray | int:
-    """Tile index floor(coord / s) along one axis, in float64 so large (UTM) coordinates stay exact."""
+    """Tile index floor(coord / s) along one axis, in float64 so large (UTM) coordinates stay exact. A
+    number needs no numpy (the provider node runs without it)."""
+    if isinstance(coord, (int, float)):
+        return math.floor(float(coord) / s)
+    import numpy as np
+
     idx = np.floor(np.asarray(coord, dtype=np.float64) / s).astype(np.int64)
     return idx if idx.ndim else int(idx)
 

@@ -37,7 +37,6 @@ from grid_puzzle_localization.provider.config import ProviderConfig, load_config
 from grid_puzzle_localization.provider.lost_search import LostSearchWindow, SearchRegion
 from grid_puzzle_localization.provider.tile_references import TileReferences
 from grid_puzzle_localization.provider.window import PoseSample, Window, WindowTracker
-from grid_puzzle_localization.ros.msgs.map_cloud_publisher import MapCloudPublisher
 from grid_puzzle_localization.ros.msgs.provider import pose_sample, provider_status, stamped, tile_delta
 from grid_puzzle_localization.tiles.directory import open_tile_directory
 from grid_puzzle_localization.util.malloc_tuning import limit_arenas, pin_mmap_threshold
@@ -86,11 +85,13 @@ class MapProviderNode:
         self.delta_pub = rospy.Publisher(
             "tile_delta", TileDelta, queue_size=50, subscriber_listener=ResetOnSubscribe(self)
         )
-        self.map_cloud = (
-            MapCloudPublisher(self._window_paths, self.frame, self.config.map_cloud_period)
-            if self.config.publish_map_cloud
-            else None
-        )
+        self.map_cloud = None
+        if self.config.publish_map_cloud:
+            # Imported only here: reading and merging tiles needs numpy, which the node otherwise never loads
+            # (about 15 MiB of RSS).
+            from grid_puzzle_localization.ros.msgs.map_cloud_publisher import MapCloudPublisher
+
+            self.map_cloud = MapCloudPublisher(self._window_paths, self.frame, self.config.map_cloud_period)
         self.status_pub = rospy.Publisher("~status", ProviderStatus, queue_size=10, latch=True)
         rospy.Service("~resend", Trigger, self._on_resend)
         if self.config.pose_source == "odom":
@@ -106,7 +107,7 @@ class MapProviderNode:
         self._worker.start()
         rospy.loginfo(
             "grid_puzzle_map_provider: %d tiles of %g m in %s (%s), n=%d k=%d, update distance %g m, listening on %s",
-            len(directory.keys),
+            len(directory),
             self.s,
             tiles.dir,
             directory.source,
