@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 import rosbag
-from reference_check import check
+from reference_check import cached_check
 from shared_data import SHARED_REAL_DATA
 
 from grid_puzzle_localization.evaluation.tracking import LOST_DEG, LOST_M, tracking
@@ -79,14 +79,12 @@ def scan_stamps(bag: Path) -> list[float]:
         return [m.header.stamp.to_sec() for _, m, _ in b.read_messages(topics=["points"])]
 
 
-def trusted_stamps(out: Path) -> np.ndarray:
-    """Times [s] of the MulRan scans whose reference agrees with registration on both sides (computed once)."""
-    cached = out / "mulran_reference_check.json"
-    if not cached.exists():
-        rows, trusted = check(MULRAN / "Scans", MULRAN / "odom_poses.txt", MULRAN_FIRST, MULRAN_LAST)
-        cached.write_text(json.dumps({"trusted": sorted(trusted), "rows": rows}))
-    times = np.loadtxt(MULRAN / "times.txt")
-    return times[json.loads(cached.read_text())["trusted"]]
+def trusted_stamps() -> np.ndarray:
+    """Times [s] of the MulRan scans whose reference agrees with registration on both sides."""
+    _, trusted = cached_check(
+        MULRAN / "Scans", MULRAN / "odom_poses.txt", MULRAN_FIRST, MULRAN_LAST, ROOT / "build" / "reference_check"
+    )
+    return np.loadtxt(MULRAN / "times.txt")[sorted(trusted)]
 
 
 def figures(variant: str, scenario: Path, run: Path, trusted: np.ndarray | None) -> list[dict]:
@@ -166,7 +164,7 @@ def main() -> int:
         if done.returncode != 0:
             print(json.dumps({"variant": variant, "error": f"gpm experiment failed, see {log}"}), flush=True)
             continue
-        trusted = trusted_stamps(args.out) if variant.startswith("mulran") else None
+        trusted = trusted_stamps() if variant.startswith("mulran") else None
         for row in figures(variant, scenario, run, trusted):
             print(json.dumps(row), flush=True)
     return 0

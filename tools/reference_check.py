@@ -21,6 +21,7 @@ summary line; needs the built workspace for ndt_align)
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import subprocess
@@ -34,6 +35,7 @@ from scipy.spatial.transform import Rotation
 from grid_puzzle_localization.pcd.writer import write_pcd
 from grid_puzzle_localization.recordings.poses import read_poses
 from grid_puzzle_localization.recordings.scans import read_scan, scan_files
+from grid_puzzle_localization.util.atomic import atomic_write
 
 NDT_ALIGN = Path(os.environ.get("GPL_WS", "")) / "devel/lib/grid_puzzle_localization/ndt_align"
 STARTS = (0.0, 0.5, 1.0, 1.5)  # scale factors of the reference's translation the registration starts from
@@ -115,6 +117,27 @@ def check(scans_dir: Path, poses_path: Path, first: int, last: int) -> tuple[lis
             rows.append({"scan": k, "next": k + 1, **check_pair(crops[k], crops[k + 1], reference)})
     consistent = {row["scan"] for row in rows if row["consistent"]}
     trusted = {k for k in range(first + 1, last) if k - 1 in consistent and k in consistent}
+    return rows, trusted
+
+
+def cached_check(
+    scans_dir: Path, poses_path: Path, first: int, last: int, cache_dir: Path
+) -> tuple[list[dict], set[int]]:
+    """check(), kept in ``cache_dir`` under a name that changes with its inputs (the scans, the poses and
+    ndt_align, by path, size and time; the range; the thresholds), so a benchmark and an experiment share one
+    run of it (some hundred registrations)."""
+    files = [Path(p).resolve() for p in (scans_dir, poses_path, NDT_ALIGN)]
+    inputs = [f"{p}:{p.stat().st_size}:{p.stat().st_mtime_ns}" for p in files]
+    settings = [first, last, STARTS, MIN_NVTL, MAX_SHIFT_M, MAX_TURN_DEG, AMBIGUOUS_RATIO, MIN_RANGE_M, ABOVE_GROUND_M]
+    key = hashlib.sha1(json.dumps([inputs, settings]).encode()).hexdigest()[:16]
+    path = Path(cache_dir) / f"reference_check_{key}.json"
+    if path.exists():
+        data = json.loads(path.read_text())
+        return data["rows"], set(data["trusted"])
+    rows, trusted = check(scans_dir, poses_path, first, last)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_write(path) as f:
+        json.dump({"trusted": sorted(trusted), "rows": rows}, f)
     return rows, trusted
 
 

@@ -52,3 +52,21 @@ def test_a_reference_off_by_a_metre_and_a_half_is_not(tmp_path, real_data, measu
     assert not row["consistent"], row
     assert row["shift_m"] == pytest.approx(1.5, abs=0.1)
     assert trusted == set()
+
+
+def test_the_cached_check_runs_once_per_input_and_again_when_the_poses_change(
+    tmp_path, real_data, measured, monkeypatch
+):
+    scans, poses = pair_folder(tmp_path, real_data, measured)
+    calls = []
+    real = reference_check.check
+    monkeypatch.setattr(reference_check, "check", lambda *args: calls.append(args) or real(*args))
+    first = reference_check.cached_check(scans, poses, 0, 1, tmp_path / "cache")
+    assert reference_check.cached_check(scans, poses, 0, 1, tmp_path / "cache") == first
+    assert len(calls) == 1 and first[0][0]["consistent"]
+    wrong = measured.copy()
+    wrong[0, 3] += 1.5
+    wrong_poses = tmp_path / "wrong.txt"
+    wrong_poses.write_text("\n".join(" ".join(f"{v:.9g}" for v in m[:3].ravel()) for m in (np.eye(4), wrong)))
+    again = reference_check.cached_check(scans, wrong_poses, 0, 1, tmp_path / "cache")
+    assert len(calls) == 2 and not again[0][0]["consistent"]
