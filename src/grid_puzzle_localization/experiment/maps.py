@@ -36,7 +36,7 @@ def ensure_tiles(global_map: str | os.PathLike, tile_dir: str | os.PathLike, gri
 EMPTY_MAP_POINT = (1.0e5, 1.0e5, 0.0)  # [m] the empty map's one point, far from any route
 
 
-def ensure_empty_map(directory: str | os.PathLike, grid_size_m: float) -> tuple[Path, Path]:
+def write_empty_map(directory: str | os.PathLike, grid_size_m: float) -> tuple[Path, Path]:
     """An empty map in ``directory`` for the runs that measure each process's floor: a PCD whose one point
     lies far from any route (a tile directory must list a tile), and its tiles. Returns (PCD path, tile
     directory)."""
@@ -46,7 +46,6 @@ def ensure_empty_map(directory: str | os.PathLike, grid_size_m: float) -> tuple[
     from grid_puzzle_localization.tiling.tiler import TileConfig, tile_map
 
     directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
     pcd, tiles = directory / "empty.pcd", directory / f"tiles_s{grid_size_m:g}"
     write_pcd(pcd, np.array([EMPTY_MAP_POINT], dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4")]))
     tile_map([pcd], tiles, TileConfig(grid_size=grid_size_m, progress=False, force=True))

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import shutil
 import sys
+import tempfile
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -17,7 +18,7 @@ from scipy.spatial.transform import Rotation
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation.trajectory import read_tum
 from grid_puzzle_localization.experiment.config import EMPTY_MAP_MODES, ExperimentConfig
-from grid_puzzle_localization.experiment.maps import ensure_empty_map
+from grid_puzzle_localization.experiment.maps import write_empty_map
 from grid_puzzle_localization.experiment.processes import ManagedProcess, wait_for
 from grid_puzzle_localization.experiment.ros_stack import RosCore, rosbag_play, roslaunch, run_node
 from grid_puzzle_localization.monitor.log import write_csv
@@ -191,11 +192,13 @@ def run_mode(cfg: ExperimentConfig, mode: str, inputs: ModeInputs, initial_pose:
 
 
 def run_empty_map(cfg: ExperimentConfig, mode: str, initial_pose: list[float]) -> ModeOutcome:
-    """The mode's launch against an empty map for the first ``cfg.empty_map_s`` seconds of the bag, into
-    OUT/<mode>/empty_map/: the floor that the report subtracts to get each process's map memory."""
-    global_map, tiles = ensure_empty_map(cfg.out_dir / EMPTY_MAP_DIR, cfg.window.grid_size_m)
-    inputs = ModeInputs(global_map, tiles, cfg.out_dir / mode / EMPTY_MAP_DIR, cfg.empty_map_s, record=False)
-    return run_mode(cfg, mode, inputs, initial_pose)
+    """The mode's launch against an empty map (written to a temporary directory) for the first
+    ``cfg.empty_map_s`` seconds of the bag, into OUT/<mode>/empty_map/: the floor that the report subtracts to
+    get each process's map memory."""
+    with tempfile.TemporaryDirectory(prefix="gpm_empty_map_") as tmp:
+        global_map, tiles = write_empty_map(tmp, cfg.window.grid_size_m)
+        inputs = ModeInputs(global_map, tiles, cfg.out_dir / mode / EMPTY_MAP_DIR, cfg.empty_map_s, record=False)
+        return run_mode(cfg, mode, inputs, initial_pose)
 
 
 def run_experiment(cfg: ExperimentConfig, tiles: Path | None, storage: dict | None) -> dict:
