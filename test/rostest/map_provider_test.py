@@ -270,10 +270,15 @@ class MapProviderTest(unittest.TestCase):
         )
         self.apply_new_deltas()
         self.assertEqual(self.mirror, brute_force_window_files(self.dir, home, S))
-        # Lost again; this time a pose given by hand (rviz's initialpose) takes the window back to it.
+        # Lost again; this time a pose given by hand (rviz's initialpose) takes the window back to it. The wait is
+        # for a new delta: the first search's window is in the history, and an initialpose sent before the status
+        # is handled would be overtaken by it.
+        seen = MapProviderTest.last_revision
         status.header.stamp = rospy.Time.now()
         self.localizer_status.publish(status)
-        self.deltas.wait_for(lambda d: (d.i_min, d.i_max, d.j_min, d.j_max) == grown, "the search's window again")
+        self.deltas.wait_for(
+            lambda d: d.revision > seen and (d.i_min, d.i_max, d.j_min, d.j_max) == grown, "the search's window again"
+        )
         self.apply_new_deltas()
         seen = MapProviderTest.last_revision
         self.initialpose.publish(initial_pose(5.3, 5.3))
