@@ -144,6 +144,8 @@ class GlobalLocalizer {
   /// `map_points` (which then need >= ndt.min_points_per_voxel points per voxel, i.e. not voxel means).
   void setMap(const PointCloud& map_points, std::shared_ptr<const VoxelMap> ndt_target = nullptr);
   bool hasMap() const;
+  /// Forgets the map and its search structures (and releases the NDT target it held).
+  void clearMap();
   /// [m] x-y bounding box of the map's structure points (both zero without a map); lets a caller search the whole
   /// map.
   Eigen::AlignedBox2d mapBounds() const;

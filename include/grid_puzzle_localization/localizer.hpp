@@ -198,6 +198,9 @@ class Localizer {
   std::optional<Eigen::AlignedBox3d> mapBounds() const;
   /// The pose of the last accepted match, if any since the last reset.
   std::optional<Eigen::Isometry3d> lastAcceptedPose() const;
+  /// True while the global search's structures (built by the last search) are held. They are released when a new
+  /// map snapshot arrives, with the snapshot they were built from, and rebuilt by the next search.
+  bool holdsSearchMap() const { return global_target_ != nullptr; }
 
  private:
   bool acceptable(const NdtResult& r) const;

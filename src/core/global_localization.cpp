@@ -212,6 +212,8 @@ void GlobalLocalizer::setMap(const PointCloud& map_points, std::shared_ptr<const
 
 bool GlobalLocalizer::hasMap() const { return map_ && !map_->structure.empty(); }
 
+void GlobalLocalizer::clearMap() { map_.reset(); }
+
 Eigen::AlignedBox2d GlobalLocalizer::mapBounds() const {
   if (!hasMap()) return Eigen::AlignedBox2d(Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero());
   return map_->bounds;

@@ -242,6 +242,12 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     // The old snapshot may hold the last reference to thousands of voxel buffers: the worker frees them.
     worker_.retire(std::exchange(target_, std::move(next)));
     out.map_swapped = true;
+    if (global_target_) {
+      // The search structures of an older target would be rebuilt before the next search anyway, and they hold
+      // that target alive (in tiles mode a whole window that has moved on): release both now.
+      global_.clearMap();
+      worker_.retire(std::move(global_target_));
+    }
   }
   if (target_) {
     out.target_voxels = target_->gaussianCount();

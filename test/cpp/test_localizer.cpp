@@ -545,3 +545,30 @@ TEST(Localizer, GlobalLocalizeSetsThePoseWithoutAnInitialPose) {
   EXPECT_LT(t::translationError(out.pose, truth), 0.05);
   EXPECT_LT(t::rotationError(out.pose, truth), 0.005);
 }
+
+TEST(Localizer, SearchStructuresAreReleasedWithTheMapTheyWereBuiltFrom) {
+  // In tiles mode the target changes as the window moves: structures built for an old window are never used again
+  // and would keep that window's voxels alive. A static map keeps them (a later search reuses them).
+  const Eigen::Isometry3d truth = t::poseXYYaw(-6.0, 4.0, -1.2);
+  const gpl::PointCloud world = t::makeWorld();
+  gpl::Localizer loc(testConfig());
+  loc.map().submit(gpl::MapChange::fullCloud(world));
+  loc.map().waitIdle();
+  loc.processScan(0.0, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 900), mount());
+  gpl::SearchRegion region;
+  region.centre = t::poseXYYaw(-4.0, 3.0, 0.0);
+  region.radius = 8.0;
+  region.yaw_range = M_PI;
+  ASSERT_TRUE(loc.globalLocalize(region).found);
+  EXPECT_TRUE(loc.holdsSearchMap());
+  EXPECT_TRUE(loc.processScan(0.1, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 901), mount()).match_accepted);
+  EXPECT_TRUE(loc.holdsSearchMap());  // same map
+  loc.map().submit(gpl::MapChange::fullCloud(world));
+  loc.map().waitIdle();
+  const gpl::LocalizerOutput out =
+      loc.processScan(0.2, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 902), mount());
+  EXPECT_TRUE(out.map_swapped);
+  EXPECT_FALSE(loc.holdsSearchMap());
+  ASSERT_TRUE(loc.globalLocalize(region).found);  // rebuilt for the new map
+  EXPECT_TRUE(loc.holdsSearchMap());
+}
