@@ -264,11 +264,13 @@ int run(const std::string& dir, const std::string& mode, double s, int n, int k,
       "\"first_map_s\": %.3f, \"scans\": %d, \"tracked\": %d, \"worst_error_m\": %.4f, "
       "\"scan_cpu_ms_mean\": %.2f, \"process_cpu_ms_per_scan\": %.2f, \"map_updates\": %zu, \"tiles_read\": %zu, "
       "\"cache_hits\": %zu, \"load_points\": %.0f, \"load_ms\": %.1f, \"load_mpoints_per_s\": %.2f, "
-      "\"tile_read_ms\": %.1f, \"tile_fold_ms\": %.1f, \"rss_end_mb\": %.1f}\n",
+      "\"tile_read_ms\": %.1f, \"tile_fold_ms\": %.1f, \"rss_end_mb\": %.1f, \"voxel_storage_mb\": %.1f, "
+      "\"voxels_end\": %zu, \"cache_mb\": %.1f}\n",
       mode.c_str(), pcdPoints(dir + "/global.pcd"), first.points, first.voxels, st.tile_aligned ? "true" : "false",
       procStatusMb("VmHWM"), rss_before, rss_map - rss_before, load_s, scans, tracked, worst_error,
       1e3 * scan_cpu / scans, 1e3 * process_cpu / scans, updates, st.tiles_read, st.cache_hits, load_points, load_ms,
-      load_ms > 0 ? load_points / load_ms / 1e3 : 0.0, st.tile_read_ms, st.tile_fold_ms, procStatusMb("VmRSS"));
+      load_ms > 0 ? load_points / load_ms / 1e3 : 0.0, st.tile_read_ms, st.tile_fold_ms, procStatusMb("VmRSS"),
+      st.map_bytes / 1048576.0, st.voxels, st.cache_bytes / 1048576.0);
   return 0;
 }
 

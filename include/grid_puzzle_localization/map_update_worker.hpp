@@ -67,6 +67,7 @@ struct MapUpdateStats {
   std::size_t tiles = 0;         ///< tiles loaded (tiles mode)
   std::size_t voxels = 0;        ///< voxels with a valid Gaussian in the last snapshot
   std::size_t points = 0;        ///< points summed into the last snapshot
+  std::size_t map_bytes = 0;     ///< heap bytes of the last snapshot's voxel storage (VoxelMap::bytes)
   bool tile_aligned = false;     ///< tiles mode: voxels are tile-aligned (see MapChange)
   // Tiles by reference, totals since start:
   std::size_t tiles_read = 0;        ///< tile files read (window and prefetch)
@@ -85,7 +86,7 @@ class MapUpdateWorker {
   /// Starts the worker thread. `params` must validate (throws std::invalid_argument otherwise); its
   /// `threads` is the OpenMP team of the updates, so a small value leaves cores to the scan thread.
   explicit MapUpdateWorker(const VoxelMapParams& params);
-  static constexpr double kDefaultTileCacheMb = 4.0;
+  static constexpr double kDefaultTileCacheMb = 1.0;
   /// Byte budget of the prefetch cache of tiles mode by reference [MiB] (>= 0; 0 = no prefetch). Thread-safe.
   void setTileCacheMb(double megabytes);
   /// Stops the worker after the change in progress; queued changes are dropped.
@@ -123,9 +124,17 @@ class MapUpdateWorker {
   // Tiles mode bookkeeping shared by both tile sources.
   void startTiles(NdtTarget& target, bool reset, double grid_size);
   void removeTiles(NdtTarget& target, const std::vector<std::string>& ids);
-  // Adds tiles (id, points) as one target update when tile-aligned; a bad id goes to `failures`.
-  void addTiles(NdtTarget& target, const std::vector<std::pair<std::string, const PointCloud*>>& batch,
-                std::vector<std::string>& failures);
+  // A tile on its way into the target: its voxels' statistics when tile-aligned (reduced as soon as it is read),
+  // else its points.
+  struct PendingTile {
+    std::string id;
+    TileVoxels voxels;
+    PointCloud points;
+  };
+  // The tile `id` made from `points`; std::invalid_argument for an id that is not a tile name.
+  PendingTile pendingTile(const std::string& id, PointCloud points) const;
+  // Adds tiles as one target update when tile-aligned; a tile already loaded is replaced.
+  void addTiles(NdtTarget& target, const std::vector<PendingTile>& batch);
   PointCloud readTile(const std::string& path);  // counts into stats_
   void readAhead();                              // prefetch while nothing is queued
 

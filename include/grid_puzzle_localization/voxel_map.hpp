@@ -169,6 +169,20 @@ struct TileKey {
 /// Only then does every voxel lie in exactly one tile (tile-aligned voxels).
 int voxelsPerTileSide(double tile_size, double resolution);
 
+/// One tile reduced to the statistics of its own voxels (tile-aligned voxels): what NdtTarget::addTileVoxels
+/// folds in, and what the prefetch cache keeps of a tile read ahead (a few dozen times smaller than its points).
+struct TileVoxels {
+  TileKey key;
+  std::vector<std::pair<VoxelKey, VoxelStats>> voxels;  ///< one entry per voxel, in ascending key order
+  std::size_t outside = 0;  ///< finite points dropped because their voxel lies in another tile
+  std::size_t bytes() const { return sizeof(TileVoxels) + voxels.capacity() * sizeof(voxels.front()); }
+};
+
+/// Reduces the points of tile `key` of side `tile_size` [m] to its voxels' statistics. `tile_size` must be a whole
+/// multiple of `resolution` (voxelsPerTileSide > 0; else std::invalid_argument). Each voxel sums its points in the
+/// order of `points`, as a from-scratch build of the same points does, so the statistics are exactly equal.
+TileVoxels tileVoxels(const TileKey& key, double tile_size, double resolution, const PointCloud& points);
+
 /// Builds and incrementally updates the NDT target, publishing immutable VoxelMap snapshots.
 ///
 /// Ownership and threads: an NdtTarget is a single-writer object. Call its mutating methods (setTarget,
@@ -200,6 +214,9 @@ class NdtTarget {
   std::size_t addTile(const TileKey& key, double tile_size, const PointCloud& points);
   /// addTile of several tiles (distinct keys) as one update: each touched shard is copied once, not once per tile.
   std::size_t addTiles(const std::vector<std::pair<TileKey, const PointCloud*>>& tiles, double tile_size);
+  /// Adds tiles already reduced by tileVoxels (distinct keys, none in the target, the same resolution) as one
+  /// update. Returns the points they dropped as outside.
+  std::size_t addTileVoxels(const std::vector<const TileVoxels*>& tiles);
   /// Drops every voxel of the tiles `keys` (side `tile_size`, as in addTile).
   void removeTiles(const std::vector<TileKey>& keys, double tile_size);
   std::vector<TargetId> targetIds() const;  ///< ids currently added, ascending

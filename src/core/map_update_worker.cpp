@@ -144,7 +144,7 @@ double threadCpuMs() {
   return 1e3 * ts.tv_sec + 1e-6 * ts.tv_nsec;
 }
 
-constexpr std::size_t kFoldBatchPoints = 1 << 21;  // ~2 M points, 24 MB of x y z waiting to be folded
+constexpr std::size_t kFoldBatchPoints = 1 << 21;  // ~2 M points read per fold, their voxels waiting meanwhile
 
 bool isDirectory(const std::string& path) {
   struct stat st;
@@ -167,9 +167,15 @@ void MapUpdateWorker::apply(NdtTarget& target, const MapChange& change, std::vec
       startTiles(target, change.reset, change.grid_size);
       removeTiles(target, change.removed);
       {
-        std::vector<std::pair<std::string, const PointCloud*>> batch;
-        for (const TileCloud& tile : change.added) batch.emplace_back(tile.id, &tile.points);
-        addTiles(target, batch, failures);
+        std::vector<PendingTile> batch;
+        for (const TileCloud& tile : change.added) {
+          try {
+            batch.push_back(pendingTile(tile.id, tile.points));
+          } catch (const std::invalid_argument& e) {
+            failures.emplace_back(e.what());
+          }
+        }
+        addTiles(target, batch);
       }
       break;
     case MapChange::Kind::kTileFiles:
@@ -206,31 +212,35 @@ void MapUpdateWorker::removeTiles(NdtTarget& target, const std::vector<std::stri
   if (!aligned.empty()) target.removeTiles(aligned, tile_size_);
 }
 
-void MapUpdateWorker::addTiles(NdtTarget& target, const std::vector<std::pair<std::string, const PointCloud*>>& batch,
-                               std::vector<std::string>& failures) {
+MapUpdateWorker::PendingTile MapUpdateWorker::pendingTile(const std::string& id, PointCloud points) const {
+  PendingTile tile;
+  tile.id = id;
+  if (aligned_)
+    tile.voxels = tileVoxels(tileKeyOfStem(id, tile_size_), tile_size_, params_.resolution, points);
+  else
+    tile.points = std::move(points);
+  return tile;
+}
+
+void MapUpdateWorker::addTiles(NdtTarget& target, const std::vector<PendingTile>& batch) {
   std::vector<std::string> reloaded;
-  for (const auto& tile : batch)
-    if (tiles_.count(tile.first)) reloaded.push_back(tile.first);
+  for (const PendingTile& tile : batch)
+    if (tiles_.count(tile.id)) reloaded.push_back(tile.id);
   removeTiles(target, reloaded);
-  std::vector<std::pair<TileKey, const PointCloud*>> aligned;
-  for (const auto& [id, points] : batch) {
-    if (tiles_.count(id)) continue;  // twice in one batch: the first copy counts
-    LoadedTile tile;
-    try {
-      if (aligned_) {
-        tile.key = tileKeyOfStem(id, tile_size_);
-        aligned.emplace_back(tile.key, points);
-      } else {
-        tile.id = next_id_++;
-        target.addTarget(tile.id, *points);
-      }
-    } catch (const std::invalid_argument& e) {
-      failures.emplace_back(e.what());
-      continue;
+  std::vector<const TileVoxels*> aligned;
+  for (const PendingTile& tile : batch) {
+    if (tiles_.count(tile.id)) continue;  // twice in one batch: the first copy counts
+    LoadedTile loaded;
+    if (aligned_) {
+      loaded.key = tile.voxels.key;
+      aligned.push_back(&tile.voxels);
+    } else {
+      loaded.id = next_id_++;
+      target.addTarget(loaded.id, tile.points);
     }
-    tiles_.emplace(id, tile);
+    tiles_.emplace(tile.id, loaded);
   }
-  if (!aligned.empty()) totals_.points_outside += target.addTiles(aligned, tile_size_);
+  if (!aligned.empty()) totals_.points_outside += target.addTileVoxels(aligned);
 }
 
 PointCloud MapUpdateWorker::readTile(const std::string& path) {
@@ -261,15 +271,13 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
   prefetch_.assign(change.prefetch.rbegin(), change.prefetch.rend());  // read from the back: first id first
   removeTiles(target, change.removed);
   // Tiles are folded in batches of about kFoldBatchPoints: one target update (each touched shard copied once) per
-  // batch instead of per tile, while the points waiting to be folded stay bounded.
-  std::vector<std::pair<std::string, PointCloud>> pending;
+  // batch instead of per tile, while what waits to be folded stays bounded.
+  std::vector<PendingTile> pending;
   std::size_t pending_points = 0;
   const auto fold = [&] {
-    std::vector<std::pair<std::string, const PointCloud*>> batch;
-    for (const auto& tile : pending) batch.emplace_back(tile.first, &tile.second);
     const auto start = Clock::now();
     const double cpu = threadCpuMs();
-    addTiles(target, batch, failures);
+    addTiles(target, pending);
     totals_.tile_fold_cpu_ms += threadCpuMs() - cpu;
     totals_.tile_fold_ms += msSince(start);
     pending.clear();
@@ -278,14 +286,23 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
   for (const std::string& id : change.added) {
     const std::string path = change.dir + "/" + id + ".pcd";
     try {
-      std::optional<PointCloud> points = cache_.take(path);
-      if (points)
+      std::optional<TileVoxels> cached = aligned_ ? cache_.take(path) : std::nullopt;
+      if (cached) {
         ++totals_.cache_hits;
-      else
-        points = readTile(path);
-      pending_points += points->size();
-      pending.emplace_back(id, std::move(*points));
-    } catch (const std::exception& e) {  // PcdReadError names the file
+        PendingTile tile;
+        tile.id = id;
+        tile.voxels = std::move(*cached);
+        pending.push_back(std::move(tile));
+      } else {
+        PointCloud points = readTile(path);
+        pending_points += points.size();
+        const auto start = Clock::now();
+        const double cpu = threadCpuMs();
+        pending.push_back(pendingTile(id, std::move(points)));
+        totals_.tile_fold_cpu_ms += threadCpuMs() - cpu;
+        totals_.tile_fold_ms += msSince(start);
+      }
+    } catch (const std::exception& e) {  // PcdReadError names the file; a bad id says what a tile name is
       failures.push_back("tile " + id + " skipped: " + e.what());
     }
     if (pending_points >= kFoldBatchPoints) fold();
@@ -303,9 +320,10 @@ void MapUpdateWorker::readAhead() {
     const std::string id = prefetch_.back();
     prefetch_.pop_back();
     const std::string path = tile_dir_ + "/" + id + ".pcd";
-    if (tiles_.count(id) || cache_.contains(path) || cache_.budget() == 0) continue;
+    // Read ahead keeps a tile's voxel statistics; without tile-aligned voxels there are none to keep.
+    if (!aligned_ || tiles_.count(id) || cache_.contains(path) || cache_.budget() == 0) continue;
     try {
-      cache_.put(path, readTile(path));
+      cache_.put(path, tileVoxels(tileKeyOfStem(id, tile_size_), tile_size_, params_.resolution, readTile(path)));
     } catch (const std::exception&) {
       // Reported when the tile enters the window and is read again.
     }
@@ -369,6 +387,7 @@ void MapUpdateWorker::run() {
       stats_.tile_aligned = aligned_;
       stats_.voxels = snapshot->gaussianCount();
       stats_.points = snapshot->pointCount();
+      stats_.map_bytes = snapshot->bytes();
       errors_.insert(errors_.end(), failures.begin(), failures.end());
     }
     working_ = false;

@@ -292,32 +292,67 @@ std::size_t NdtTarget::addTile(const TileKey& key, double tile_size, const Point
   return addTiles({{key, &points}}, tile_size);
 }
 
+TileVoxels tileVoxels(const TileKey& key, double tile_size, double resolution, const PointCloud& points) {
+  const std::int64_t m = checkedVoxelsPerTile(tile_size, resolution);
+  const double inv = 1.0 / resolution;
+  TileVoxels out;
+  out.key = key;
+  // The voxel index voxelStatistics computes, so the owner test agrees with the voxel a point lands in.
+  std::vector<std::pair<VoxelKey, std::uint32_t>> keyed;  // (voxel, point index)
+  keyed.reserve(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const Eigen::Vector3d p = points[i].cast<double>();
+    if (!p.allFinite()) continue;
+    const VoxelKey k{static_cast<std::int32_t>(std::floor(p.x() * inv)),
+                     static_cast<std::int32_t>(std::floor(p.y() * inv)),
+                     static_cast<std::int32_t>(std::floor(p.z() * inv))};
+    if (floorDiv(k.x, m) == key.i && floorDiv(k.y, m) == key.j)
+      keyed.emplace_back(k, static_cast<std::uint32_t>(i));
+    else
+      ++out.outside;
+  }
+  // By voxel, then by point index: each voxel's points are summed in the order of the cloud.
+  std::sort(keyed.begin(), keyed.end(), [](const auto& a, const auto& b) {
+    const VoxelKey &u = a.first, &v = b.first;
+    if (u.x != v.x) return u.x < v.x;
+    if (u.y != v.y) return u.y < v.y;
+    if (u.z != v.z) return u.z < v.z;
+    return a.second < b.second;
+  });
+  std::size_t voxels = 0;
+  for (std::size_t i = 0; i < keyed.size(); ++i) voxels += i == 0 || !(keyed[i].first == keyed[i - 1].first);
+  out.voxels.reserve(voxels);
+  for (std::size_t i = 0; i < keyed.size(); ++i) {
+    const VoxelKey& k = keyed[i].first;
+    if (i == 0 || !(k == keyed[i - 1].first)) out.voxels.emplace_back(k, VoxelStats());
+    const Eigen::Vector3d corner(k.x * resolution, k.y * resolution, k.z * resolution);
+    out.voxels.back().second.add(points[keyed[i].second].cast<double>() - corner);
+  }
+  return out;
+}
+
 std::size_t NdtTarget::addTiles(const std::vector<std::pair<TileKey, const PointCloud*>>& tiles, double tile_size) {
-  const std::int64_t m = checkedVoxelsPerTile(tile_size, params_.resolution);
-  const double inv = 1.0 / params_.resolution;
-  // The same voxel index as voxelStatistics computes, so the owner test agrees with the voxel a point lands in.
-  const auto inside = [&](const Point& p, const TileKey& key) {
-    const Eigen::Vector3d d = p.cast<double>();
-    return floorDiv(static_cast<std::int32_t>(std::floor(d.x() * inv)), m) == key.i &&
-           floorDiv(static_cast<std::int32_t>(std::floor(d.y() * inv)), m) == key.j;
-  };
-  std::size_t total = 0;
-  for (const auto& tile : tiles) total += tile.second->size();
-  // One cloud, tile after tile in their own order: a voxel's points are summed in the order of its tile's file,
-  // as in a from-scratch build of the same tiles.
-  PointCloud kept;
-  kept.reserve(total);
+  std::vector<TileVoxels> reduced;
+  reduced.reserve(tiles.size());
+  for (const auto& [key, points] : tiles) reduced.push_back(tileVoxels(key, tile_size, params_.resolution, *points));
+  std::vector<const TileVoxels*> views;
+  for (const TileVoxels& t : reduced) views.push_back(&t);
+  return addTileVoxels(views);
+}
+
+std::size_t NdtTarget::addTileVoxels(const std::vector<const TileVoxels*>& tiles) {
+  // apply() takes the voxels grouped by shard.
+  std::vector<std::pair<std::uint32_t, const std::pair<VoxelKey, VoxelStats>*>> order;
   std::size_t outside = 0;
-  for (const auto& [key, points] : tiles)
-    for (const Point& p : *points) {
-      if (!p.allFinite()) continue;
-      if (inside(p, key))
-        kept.push_back(p);
-      else
-        ++outside;
-    }
-  const Delta delta = voxelStatistics(kept, params_.resolution, params_.threads);
-  kept = PointCloud();
+  for (const TileVoxels* t : tiles) {
+    outside += t->outside;
+    for (const auto& v : t->voxels) order.emplace_back(static_cast<std::uint32_t>(VoxelMap::shardOf(v.first)), &v);
+  }
+  std::stable_sort(order.begin(), order.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  Delta delta;
+  delta.reserve(order.size());
+  for (const auto& o : order) delta.push_back(*o.second);
+  order = {};
   apply(delta, false, current_);
   return outside;
 }
@@ -338,6 +373,11 @@ void NdtTarget::removeTiles(const std::vector<TileKey>& keys, double tile_size) 
     const VoxelMap::Shard* old = base->shards_[s].get();
     if (!old || std::none_of(old->keys.begin(), old->keys.end(), owned)) continue;
     auto shard = std::make_shared<VoxelMap::Shard>();
+    const std::size_t kept = static_cast<std::size_t>(
+        std::count_if(old->keys.begin(), old->keys.end(), [&](const VoxelKey& key) { return !owned(key); }));
+    shard->keys.reserve(kept);  // exact sizes: a shard's vectors hold no growth slack
+    shard->stats.reserve(kept);
+    shard->gaussians.reserve(kept);
     for (std::size_t i = 0; i < old->keys.size(); ++i) {
       if (owned(old->keys[i])) {
         --d_vox[s];
@@ -388,7 +428,19 @@ void NdtTarget::apply(const Delta& delta, bool subtract, std::shared_ptr<const V
   for (std::size_t r = 0; r < ranges.size(); ++r) {
     const std::size_t s = VoxelMap::shardOf(delta[ranges[r].first].first);
     const VoxelMap::Shard* old = base->shards_[s].get();
-    auto shard = old ? std::make_shared<VoxelMap::Shard>(*old) : std::make_shared<VoxelMap::Shard>();
+    auto shard = std::make_shared<VoxelMap::Shard>();
+    // Room for every voxel of the range up front (exact when they are all new, as for an added tile or a whole
+    // map): growing by push_back would leave up to half of each vector as slack for as long as the shard lives.
+    const std::size_t room = (old ? old->keys.size() : 0) + (subtract ? 0 : ranges[r].second - ranges[r].first);
+    shard->keys.reserve(room);
+    shard->stats.reserve(room);
+    shard->gaussians.reserve(room);
+    if (old) {
+      shard->keys = old->keys;
+      shard->stats = old->stats;
+      shard->gaussians = old->gaussians;
+      shard->slots = old->slots;
+    }
     const std::int64_t vox_before = static_cast<std::int64_t>(shard->keys.size());
     std::int64_t gauss_before = 0;
     for (const auto& g : shard->gaussians) gauss_before += g.valid;
@@ -443,6 +495,9 @@ void NdtTarget::apply(const Delta& delta, bool subtract, std::shared_ptr<const V
       shard->gaussians.resize(w);
       rebuildSlots(*shard);
     }
+    shard->keys.shrink_to_fit();  // no-ops when the reserve above was exact
+    shard->stats.shrink_to_fit();
+    shard->gaussians.shrink_to_fit();
     std::int64_t gauss_after = 0;
     for (const auto& g : shard->gaussians) gauss_after += g.valid;
     d_vox[r] = static_cast<std::int64_t>(shard->keys.size()) - vox_before;

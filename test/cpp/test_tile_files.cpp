@@ -4,9 +4,13 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <map>
+#include <random>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "grid_puzzle_localization/map_update_worker.hpp"
@@ -165,6 +169,36 @@ TEST(NdtTarget, AddTileDropsPointsWhoseVoxelLiesInAnotherTile) {
   EXPECT_EQ(target.snapshot()->voxelCount(), 0u);
 }
 
+TEST(TileVoxels, EqualTheStatisticsOfAFromScratchBuildOfTheTilesOwnPoints) {
+  // Tile (1, -2) of side 2 m covers [2, 4) x [-4, -2); the points spill 0.5 m over each border and one is NaN.
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> x(1.5f, 4.5f), y(-4.5f, -1.5f), z(-3.0f, 3.0f);
+  gpl::PointCloud points, own;
+  for (int i = 0; i < 3000; ++i) {
+    const gpl::Point p(x(rng), y(rng), z(rng));
+    points.push_back(p);
+    if (p.x() >= 2.0f && p.x() < 4.0f && p.y() >= -4.0f && p.y() < -2.0f) own.push_back(p);
+  }
+  points.push_back(gpl::Point(NAN, 3.0f, 0.0f));
+  const gpl::TileVoxels tile = gpl::tileVoxels({1, -2}, 2.0, 1.0, points);
+  EXPECT_EQ(tile.outside, points.size() - 1 - own.size());
+  const auto reference = gpl::voxelStatistics(own, 1.0, 1);
+  ASSERT_EQ(tile.voxels.size(), reference.size());
+  std::map<std::tuple<int, int, int>, gpl::VoxelStats> by_key;
+  for (const auto& [k, st] : reference) by_key[{k.x, k.y, k.z}] = st;
+  for (std::size_t i = 0; i < tile.voxels.size(); ++i) {
+    const auto& [k, st] = tile.voxels[i];
+    if (i > 0)
+      EXPECT_LT(std::make_tuple(tile.voxels[i - 1].first.x, tile.voxels[i - 1].first.y, tile.voxels[i - 1].first.z),
+                std::make_tuple(k.x, k.y, k.z));
+    const gpl::VoxelStats& o = by_key.at({k.x, k.y, k.z});
+    EXPECT_EQ(o.count, st.count);
+    for (int a = 0; a < 3; ++a) EXPECT_EQ(o.sum[a], st.sum[a]);
+    for (int a = 0; a < 6; ++a) EXPECT_EQ(o.sum_sq[a], st.sum_sq[a]);
+  }
+  EXPECT_THROW(gpl::tileVoxels({0, 0}, 2.5, 1.0, points), std::invalid_argument);
+}
+
 TEST(TileFiles, MissingAndCorruptTilesAreReportedByFileAndTheRestIsLoaded) {
   TiledWorld w(2.0);
   const std::string missing = w.ids[3], truncated = w.ids[4], garbage = w.ids[5];
@@ -251,8 +285,9 @@ TEST(TileFiles, PrefetchedTilesAreServedFromTheCacheWithinTheBudget) {
 }
 
 TEST(TileCache, EvictsTheOldestBeyondItsBudget) {
-  const gpl::PointCloud ten(10, gpl::Point::Zero());
-  const std::size_t b = gpl::TileCache::bytesOf(ten);
+  gpl::TileVoxels ten;
+  ten.voxels.resize(10);
+  const std::size_t b = gpl::TileCache::bytesOf("a", ten);
   gpl::TileCache cache(2 * b);
   cache.put("a", ten);
   cache.put("b", ten);
@@ -260,7 +295,9 @@ TEST(TileCache, EvictsTheOldestBeyondItsBudget) {
   EXPECT_FALSE(cache.contains("a"));
   EXPECT_TRUE(cache.contains("b") && cache.contains("c"));
   EXPECT_EQ(cache.bytes(), 2 * b);
-  cache.put("big", gpl::PointCloud(100));
+  gpl::TileVoxels big;
+  big.voxels.resize(100);
+  cache.put("big", big);
   EXPECT_FALSE(cache.contains("big"));
   ASSERT_TRUE(cache.take("b"));
   EXPECT_EQ(cache.bytes(), b);
