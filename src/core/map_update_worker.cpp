@@ -144,6 +144,16 @@ double threadCpuMs() {
   return 1e3 * ts.tv_sec + 1e-6 * ts.tv_nsec;
 }
 
+// Runs work() and adds its wall time and the calling thread's CPU time [ms] to the two totals.
+template <typename Work>
+void timed(double& wall_ms, double& cpu_ms, Work&& work) {
+  const auto start = Clock::now();
+  const double cpu = threadCpuMs();
+  work();
+  cpu_ms += threadCpuMs() - cpu;
+  wall_ms += msSince(start);
+}
+
 constexpr std::size_t kFoldBatchPoints = 1 << 21;  // ~2 M points read per fold, their voxels waiting meanwhile
 
 bool isDirectory(const std::string& path) {
@@ -244,11 +254,8 @@ void MapUpdateWorker::addTiles(NdtTarget& target, const std::vector<PendingTile>
 }
 
 PointCloud MapUpdateWorker::readTile(const std::string& path) {
-  const auto start = Clock::now();
-  const double cpu = threadCpuMs();
-  PointCloud points = readPcdXyz(path);
-  totals_.tile_read_cpu_ms += threadCpuMs() - cpu;
-  totals_.tile_read_ms += msSince(start);
+  PointCloud points;
+  timed(totals_.tile_read_ms, totals_.tile_read_cpu_ms, [&] { points = readPcdXyz(path); });
   ++totals_.tiles_read;
   totals_.tile_points_read += points.size();
   return points;
@@ -275,11 +282,7 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
   std::vector<PendingTile> pending;
   std::size_t pending_points = 0;
   const auto fold = [&] {
-    const auto start = Clock::now();
-    const double cpu = threadCpuMs();
-    addTiles(target, pending);
-    totals_.tile_fold_cpu_ms += threadCpuMs() - cpu;
-    totals_.tile_fold_ms += msSince(start);
+    timed(totals_.tile_fold_ms, totals_.tile_fold_cpu_ms, [&] { addTiles(target, pending); });
     pending.clear();
     pending_points = 0;
   };
@@ -296,11 +299,8 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
       } else {
         PointCloud points = readTile(path);
         pending_points += points.size();
-        const auto start = Clock::now();
-        const double cpu = threadCpuMs();
-        pending.push_back(pendingTile(id, std::move(points)));
-        totals_.tile_fold_cpu_ms += threadCpuMs() - cpu;
-        totals_.tile_fold_ms += msSince(start);
+        timed(totals_.tile_fold_ms, totals_.tile_fold_cpu_ms,
+              [&] { pending.push_back(pendingTile(id, std::move(points))); });
       }
     } catch (const std::exception& e) {  // PcdReadError names the file; a bad id says what a tile name is
       failures.push_back("tile " + id + " skipped: " + e.what());
@@ -323,7 +323,7 @@ void MapUpdateWorker::readAhead() {
     // Read ahead keeps a tile's voxel statistics; without tile-aligned voxels there are none to keep.
     if (!aligned_ || tiles_.count(id) || cache_.contains(path) || cache_.budget() == 0) continue;
     try {
-      cache_.put(path, tileVoxels(tileKeyOfStem(id, tile_size_), tile_size_, params_.resolution, readTile(path)));
+      cache_.put(path, pendingTile(id, readTile(path)).voxels);
     } catch (const std::exception&) {
       // Reported when the tile enters the window and is read again.
     }
