@@ -332,9 +332,14 @@ void MapUpdateWorker::readAhead() {
 
 namespace {
 
-// glibc keeps freed heap pages in its per-thread arenas. Map updates free whole tile clouds and map
-// shards from several threads (callback, worker, OpenMP team), so without a trim the process keeps
-// the high-water mark of every arena and its RSS creeps up as the window moves.
+// glibc keeps freed heap pages resident until malloc_trim hands them back. Map updates free tile clouds and
+// shard copies, so without a trim the process would keep its high-water mark. A trim after every window update
+// costs more than it returns, though: the next update, the next scan message and its filtering fault the same
+// pages in again, and the kernel zeroes each one (on the urban drive, four updates a second, about 1 % of a
+// core). So the worker trims after its first change (the start-up map) and then at most once per
+// kTrimPeriod, also when it goes idle with freed memory not yet handed back.
+constexpr auto kTrimPeriod = std::chrono::seconds(2);
+
 void returnFreedMemory() {
 #if defined(__GLIBC__)
   malloc_trim(0);
@@ -346,8 +351,24 @@ void returnFreedMemory() {
 void MapUpdateWorker::run() {
   NdtTarget target(params_);
   std::unique_lock<std::mutex> lock(mutex_);
+  Clock::time_point last_trim;  // the epoch: the first change is trimmed at once
+  bool trim_pending = false;    // memory was freed since the last trim
+  const auto trimIfDue = [&] {
+    if (!trim_pending || Clock::now() - last_trim < kTrimPeriod) return;
+    returnFreedMemory();
+    last_trim = Clock::now();
+    trim_pending = false;
+  };
   for (;;) {
-    wake_.wait(lock, [this] { return stop_ || !queue_.empty() || !retired_.empty(); });
+    const auto has_work = [this] { return stop_ || !queue_.empty() || !retired_.empty(); };
+    if (!trim_pending) {
+      wake_.wait(lock, has_work);
+    } else if (!wake_.wait_until(lock, last_trim + kTrimPeriod, has_work)) {
+      lock.unlock();
+      trimIfDue();
+      lock.lock();
+      continue;
+    }
     if (stop_) return;
     std::deque<MapChange> batch;
     batch.swap(queue_);
@@ -397,7 +418,8 @@ void MapUpdateWorker::run() {
     lock.unlock();
     batch.clear();
     readAhead();
-    returnFreedMemory();
+    trim_pending = true;
+    trimIfDue();
     lock.lock();
     prefetching_ = false;
     stats_.tiles_read = totals_.tiles_read;

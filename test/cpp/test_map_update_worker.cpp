@@ -2,6 +2,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <fstream>
 #include <map>
@@ -175,4 +177,53 @@ TEST(MapUpdateWorker, RejectsBadParams) {
   gpl::VoxelMapParams p;
   p.resolution = -1.0;
   EXPECT_THROW(gpl::MapUpdateWorker{p}, std::invalid_argument);
+}
+
+namespace {
+
+std::size_t residentBytes() {
+  std::ifstream statm("/proc/self/statm");
+  std::size_t pages = 0, resident = 0;
+  statm >> pages >> resident;
+  return resident * static_cast<std::size_t>(sysconf(_SC_PAGESIZE));
+}
+
+// Points on a 0.25 m lattice over a 100 m x 100 m x 3 m box: about 30,000 voxels of 1 m.
+gpl::PointCloud denseBlock() {
+  gpl::PointCloud cloud;
+  for (float x = 0.f; x < 100.f; x += 0.25f)
+    for (float y = 0.f; y < 100.f; y += 0.25f)
+      for (float z = 0.f; z < 3.f; z += 1.f) cloud.emplace_back(x, y, z);
+  return cloud;
+}
+
+}  // namespace
+
+TEST(MapUpdateWorker, FreedMapMemoryGoesBackToTheSystemOnceTheWorkerIsIdle) {
+  gpl::VoxelMapParams params;
+  params.resolution = 1.0;
+  gpl::MapUpdateWorker worker{params};
+  worker.submit(gpl::MapChange::fullCloud(denseBlock()));
+  worker.waitIdle();
+  auto big = worker.takeReady();
+  ASSERT_NE(big, nullptr);
+  ASSERT_GT(big->gaussianCount(), 20000u);
+  const std::size_t with_map = residentBytes();
+  const std::size_t map_bytes = big->bytes();
+  // A small map replaces it; the old one is retired as the scan thread does, and the worker frees it.
+  worker.submit(gpl::MapChange::fullCloud(gpl::test::makeWorld(1.0f)));
+  worker.waitIdle();
+  auto small = worker.takeReady();
+  ASSERT_NE(small, nullptr);
+  worker.retire(std::move(big));
+  worker.waitIdle();
+  // Handed back within the worker's trim period (2 s) of its last change, without a further change.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(6);
+  std::size_t now = residentBytes();
+  while (with_map - std::min(now, with_map) < map_bytes / 2 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    now = residentBytes();
+  }
+  EXPECT_GE(with_map - std::min(now, with_map), map_bytes / 2)
+      << "resident " << with_map << " B with the map of " << map_bytes << " B, " << now << " B after it was freed";
 }
