@@ -3,13 +3,15 @@ directory rewritten or removed under a running provider."""
 
 from __future__ import annotations
 
+import random
 import shutil
+from types import SimpleNamespace
 
 import pytest
 from fixtures.synthetic_tiles import write_tiles
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.provider.tile_references import TileReferences, index_revision
+from grid_puzzle_localization.provider.tile_references import PREFETCH_MAX_TILES, TileReferences, index_revision
 from grid_puzzle_localization.provider.window import PoseSample, WindowConfig, WindowTracker
 from grid_puzzle_localization.tiles.directory import decode_key, open_tile_directory
 
@@ -70,3 +72,35 @@ def test_a_directory_that_disappears_is_a_user_error_naming_it(tile_dir):
     shutil.rmtree(tile_dir)
     with pytest.raises(UserError, match=str(tile_dir)):
         refs.refresh()
+
+
+def test_deltas_and_prefetch_equal_a_brute_force_listing_for_jumps_growth_and_overlaps(tile_dir):
+    """Windows that jump, grow, shrink and overlap in every way: the delta is the difference of the two windows'
+    tile sets and the prefetch list the ahead windows' tiles outside the window, in the order of the windows,
+    each once, all as a brute-force listing over the map's tiles gives them."""
+    refs = TileReferences(open_tile_directory(tile_dir, S))
+    rng = random.Random(3)
+    held: set[tuple[int, int]] = set()
+    for _ in range(300):
+        window, *ahead = (random_window(rng) for _ in range(rng.randrange(1, 5)))
+        delta = refs.update(window, ahead)
+        wanted = brute_force(window)
+        assert delta.added == sorted(wanted - held)
+        assert delta.removed == sorted(held - wanted)
+        held = wanted
+        expected: list[tuple[int, int]] = []
+        for w in ahead:
+            expected += [key for key in sorted(brute_force(w) - wanted) if key not in expected]
+        assert delta.prefetch == expected[:PREFETCH_MAX_TILES]
+
+
+class BoxWindow(SimpleNamespace):
+    @property
+    def bounds(self) -> tuple[int, int, int, int]:
+        return self.i_min, self.i_max, self.j_min, self.j_max
+
+
+def random_window(rng: random.Random) -> BoxWindow:
+    """A box of up to 12 x 12 tiles anywhere on the 30 x 20 map or across its edges."""
+    i0, j0 = rng.randrange(-5, 32), rng.randrange(-5, 22)
+    return BoxWindow(i_min=i0, i_max=i0 + rng.randrange(0, 12), j_min=j0, j_max=j0 + rng.randrange(0, 12))

@@ -14,6 +14,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Tuple
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.provider.window import Window
@@ -43,22 +44,43 @@ class ReferenceDelta:
     prefetch: list[Key]  # most likely first
 
 
+Box = Tuple[int, int, int, int]  # (i_min, i_max, j_min, j_max), inclusive
+
+
+def box_minus(a: Box, b: Box) -> list[Box]:
+    """``a`` without ``b``, as at most four disjoint boxes (the strips of ``a`` around ``b``)."""
+    i0, i1, j0, j1 = max(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), min(a[3], b[3])
+    if i0 > i1 or j0 > j1:
+        return [a]
+    strips = [(a[0], i0 - 1, a[2], a[3]), (i1 + 1, a[1], a[2], a[3]), (i0, i1, a[2], j0 - 1), (i0, i1, j1 + 1, a[3])]
+    return [box for box in strips if box[0] <= box[1] and box[2] <= box[3]]
+
+
 class TileReferences:
     def __init__(self, directory: TileDirectory) -> None:
         self.directory = directory
         self.revision = index_revision(directory.path)
         self._loaded: set[int] = set()  # codes (tiles.directory.encode_key) of the window's tiles
+        self._box: Box | None = None  # the window they fill
+
+    def _codes_in(self, boxes: Sequence[Box]) -> list[int]:
+        return sorted(c for box in boxes for c in self.directory.codes_in_box(*box))
 
     def update(self, window: Window, ahead: Sequence[Window] = ()) -> ReferenceDelta:
-        wanted_codes = self.directory.codes_in(window)
-        wanted = set(wanted_codes)
-        removed = sorted(self._loaded - wanted)
-        added = [c for c in wanted_codes if c not in self._loaded]
-        self._loaded = wanted
+        # A window moves by a strip at a time: only the strips between the old and the new box are listed,
+        # not the whole window (about 2,600 tiles with the urban preset).
+        box = window.bounds
+        if self._box is None:
+            added, removed = self._codes_in([box]), []
+        else:
+            added, removed = self._codes_in(box_minus(box, self._box)), self._codes_in(box_minus(self._box, box))
+        self._loaded.difference_update(removed)
+        self._loaded.update(added)
+        self._box = box
         prefetch: list[int] = []
-        named = set(wanted)
+        named: set[int] = set()
         for w in ahead:  # most likely window first
-            fresh = [c for c in self.directory.codes_in(w) if c not in named]
+            fresh = [c for c in self._codes_in(box_minus(w.bounds, box)) if c not in named]
             named.update(fresh)
             prefetch += fresh[: PREFETCH_MAX_TILES - len(prefetch)]
             if len(prefetch) == PREFETCH_MAX_TILES:
@@ -89,4 +111,5 @@ class TileReferences:
         self.directory = open_tile_directory(self.directory.path, self.directory.grid_size)
         self.revision = revision
         self._loaded = set()
+        self._box = None
         return True
