@@ -27,6 +27,10 @@ COMMANDS: dict[str, tuple[str, str]] = {
         "find a scan's pose on a map (tiles, PCD or blocks) without an initial guess; prints JSON",
     ),
     "report": ("commands.report", "Rebuild summary.json, report.md and plots of an experiment directory."),
+    "map-drift": (
+        "commands.map_drift",
+        "split a simulated run's error into the prior map's own drift and the tracker's",
+    ),
 }
 
 

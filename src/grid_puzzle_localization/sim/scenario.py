@@ -65,6 +65,16 @@ class ScenarioConfig:
     scan_rate: float | None = None  # [Hz] scans written to the bag (every n-th sweep); None: every sweep
     gaps: tuple[tuple[float, float], ...] = ()  # (start, length) [s]: nothing recorded in these intervals
 
+    @classmethod
+    def from_parameters(cls, parameters: dict) -> ScenarioConfig:
+        """The configuration a scenario.yaml's ``parameters`` describe (as ``gpm simulate`` wrote them)."""
+        p = dict(parameters)
+        p["drift"] = DriftBounds(**p.get("drift", {}))
+        p["imu_noise"] = ImuNoise(**p.get("imu_noise", {}))
+        p["yaw_swing"] = YawSwing(**p["yaw_swing"]) if p.get("yaw_swing") else None
+        p["gaps"] = tuple(tuple(g) for g in p.get("gaps", ()))
+        return cls(**p)
+
     def resolved(self) -> ScenarioConfig:
         """A copy with defaults filled in, after checking every parameter (UserError if bad)."""
         sensor = self.sensor or DEFAULT_SENSOR[check_world(self.world)]
@@ -197,8 +207,21 @@ def _write_bag(
     return len(scans), rays, points
 
 
+def runs(cfg: ScenarioConfig, world) -> tuple[Trajectory, Trajectory]:
+    """The localization run (before any yaw swing) and the mapping run of the resolved ``cfg`` in ``world``."""
+    loc = localization_trajectory(world, cfg.scale, _rng(cfg.seed, 1))
+    if cfg.duration is not None:
+        loc = loc.truncated(cfg.duration)
+    return loc, mapping_trajectory(world, loc, _rng(cfg.seed, 2))  # the map run is not hand-held
+
+
+def mapping_estimate(cfg: ScenarioConfig, mapping: Trajectory) -> Trajectory:
+    """The drifted pose estimate the mapping run's sweeps were placed at in the prior map."""
+    return drifted(mapping, cfg.drift, _rng(cfg.seed, 3))
+
+
 def _write_map(path: Path, cfg: ScenarioConfig, sim: SweepSimulator, traj: Trajectory, mount: Mount, show: bool):
-    estimate = drifted(traj, cfg.drift, _rng(cfg.seed, 3))
+    estimate = mapping_estimate(cfg, traj)
     voxels = VoxelMap(cfg.map_leaf)
     sensor = sim.sensor
     n_sweeps = int(np.floor(traj.duration * sensor.rate + 1e-9))
@@ -261,11 +284,8 @@ def generate(cfg: ScenarioConfig, out_dir: str | os.PathLike, force: bool = Fals
     world = make_world(cfg.world, cfg.seed, cfg.scale)
     out = Path(out_dir).absolute()
     check_output_dir(out, force)
-    loc = localization_trajectory(world, cfg.scale, _rng(cfg.seed, 1))
-    if cfg.duration is not None:
-        loc = loc.truncated(cfg.duration)
+    loc, mapping = runs(cfg, world)
     check_gaps(cfg.gaps, loc.duration)
-    mapping = mapping_trajectory(world, loc, _rng(cfg.seed, 2))  # along the smooth route: the map run is not hand-held
     if cfg.yaw_swing is not None:
         loc = with_yaw_swing(loc, cfg.yaw_swing)
     movers = make_movers(world, cfg.scale, loc.duration, cfg.movers, _rng(cfg.seed, 7))
