@@ -3,6 +3,7 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -39,6 +40,19 @@ inline Truth standStill(double) {
   Truth s;
   s.pose = Eigen::Translation3d(1.0, 2.0, 0.0) * Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitZ());
   s.accel = s.pose.rotation().transpose() * Eigen::Vector3d(0, 0, kG);
+  return s;
+}
+
+// Stands still for a second, then sets off along its heading at a constant 1.5 m/s^2: a smooth start, whose
+// specific force barely varies, as a car's from a stop.
+inline Truth startFromRest(double t) {
+  constexpr double kStart = 1.0, kAccel = 1.5;
+  Truth s = standStill(t);
+  const double moving = std::max(0.0, t - kStart);
+  const Eigen::Vector3d heading = s.pose.rotation().col(0);
+  s.pose.translation() += 0.5 * kAccel * moving * moving * heading;
+  s.velocity = kAccel * moving * heading;
+  if (t > kStart) s.accel += Eigen::Vector3d(kAccel, 0.0, 0.0);
   return s;
 }
 

@@ -37,7 +37,8 @@ struct SlidingWindowConfig {
   double initial_gyro_bias_std = 0.01;  ///< [rad/s] > 0, prior on the first state's gyro bias
   double initial_accel_bias_std = 0.1;  ///< [m/s^2] > 0, prior on the first state's accelerometer bias
   /// Zero-velocity update: between two states whose IMU samples all turn slower than zupt_max_gyro and whose
-  /// specific force varies less than zupt_max_accel_std, with the earlier state slower than zupt_max_speed, the
+  /// specific force varies less than zupt_max_accel_std and whose mean is within zupt_max_accel_std of gravity
+  /// alone (at the earlier state's attitude and bias), with the earlier state slower than zupt_max_speed, the
   /// robot is held still (velocity zero with zupt_velocity_std, no relative motion with zupt_pose_std).
   double zupt_max_speed = 0.1;         ///< [m/s] >= 0 (0 disables zero-velocity updates)
   double zupt_max_gyro = 0.02;         ///< [rad/s] > 0

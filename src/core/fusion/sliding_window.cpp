@@ -193,7 +193,10 @@ SlidingWindow::Interval SlidingWindow::integrate(double t0, double t1, const Sta
   if (in_interval >= 2 && out.gap == 0.0) {
     const Eigen::Vector3d mean = accel_sum / in_interval;
     const Eigen::Vector3d var = (accel_sq / in_interval - mean.cwiseProduct(mean)).cwiseMax(0.0);
+    // Setting off smoothly keeps the spread small; the mean then departs from what gravity alone gives at rest.
+    const Eigen::Vector3d at_rest = r0.transpose() * -gravity_ + bias.accel;
     out.stationary = max_rate < config_.zupt_max_gyro && var.maxCoeff() < std::pow(config_.zupt_max_accel_std, 2) &&
+                     (mean - at_rest).norm() < config_.zupt_max_accel_std &&
                      from.velocity().norm() < config_.zupt_max_speed;
   }
   return out;
