@@ -6,7 +6,9 @@ from __future__ import annotations
 import argparse
 import errno
 import importlib
+import signal
 import sys
+import threading
 
 from grid_puzzle_localization.errors import UserError
 
@@ -48,11 +50,25 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def _interrupt(_signum, _frame) -> None:
+    raise KeyboardInterrupt  # a SIGTERM (kill, a CI timeout) cleans up as Ctrl-C does: child processes, temp files
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     # The command is the first word (gpm itself has no options but -h), so only its module is imported.
     command = next((word for word in argv if not word.startswith("-")), None)
     args = build_parser(command).parse_args(argv)
+    on_main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _interrupt) if on_main_thread else None
+    try:
+        return _run(args)
+    finally:
+        if on_main_thread:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _run(args: argparse.Namespace) -> int:
     try:
         return int(importlib.import_module(f"grid_puzzle_localization.{args._module}").run(args) or 0)
     except UserError as err:

@@ -1,12 +1,15 @@
 """gpm experiment end to end with the real pieces: a tiny simulated courtyard (6 s of bag), the NDT
 localizer nodelet in global (its own PCD) and grid puzzle (tiles from the provider) modes."""
 
+import contextlib
 import json
+import signal
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+import psutil
 import pytest
 from matplotlib.image import imread
 from process_check import processes_on
@@ -92,3 +95,27 @@ def test_no_process_is_left_running(run):
     for outcome in read_json(out / "run.json")["extra"]["outcomes"]:
         assert outcome["stray_pids"] == []
         assert processes_on(outcome["master_uri"]) == []
+
+
+def test_a_terminated_experiment_stops_the_ros_processes_it_started(run, tmp_path):
+    """SIGTERM (kill, a CI timeout) in the middle of playback: gpm stops roscore, roslaunch, the nodes and rosbag
+    play as on Ctrl-C, instead of dying and leaving them running."""
+    scenario, _ = run
+    argv = [sys.executable, str(GPM), "experiment", str(scenario), "-o", str(tmp_path / "out"), "--modes", "global"]
+    gpm = subprocess.Popen([*argv, "--empty-map-seconds", "0"], stderr=subprocess.PIPE, text=True)
+    started: list[psutil.Process] = []
+    try:
+        for line in gpm.stderr:
+            if "monitoring" in line:
+                break
+        started = psutil.Process(gpm.pid).children(recursive=True)
+        assert len(started) >= 3, [p.name() for p in started]  # roscore's master, roslaunch, the nodes, ...
+        gpm.send_signal(signal.SIGTERM)
+        assert gpm.wait(timeout=120) == 130
+        _, alive = psutil.wait_procs(started, timeout=5)
+        assert alive == [], [p.pid for p in alive]
+    finally:
+        for p in [gpm, *started]:
+            with contextlib.suppress(psutil.NoSuchProcess, ProcessLookupError):
+                p.kill()
+        gpm.stderr.close()
