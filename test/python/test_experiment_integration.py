@@ -6,6 +6,7 @@ import json
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -108,7 +109,9 @@ def test_a_terminated_experiment_stops_the_ros_processes_it_started(run, tmp_pat
         for line in gpm.stderr:
             if "monitoring" in line:
                 break
+        time.sleep(2.0)  # rosbag play starts after that line
         started = psutil.Process(gpm.pid).children(recursive=True)
+        assert any("rosbag" in " ".join(p.cmdline()) for p in started)
         assert len(started) >= 3, [p.name() for p in started]  # roscore's master, roslaunch, the nodes, ...
         gpm.send_signal(signal.SIGTERM)
         assert gpm.wait(timeout=120) == 130
