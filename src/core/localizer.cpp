@@ -361,6 +361,13 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
       found_globally = g.map_T_base;
     }
   }
+  if (!best && !fresh && !velocity_trusted && !long_gap && elapsed >= 0.0) {
+    // Before a velocity is measured (the scans after a start or a recovery) the search decides. A scene it finds
+    // ambiguous (a tunnel fits many places along itself) the match from the last accepted pose may still fit: it is
+    // taken when it fits as well as the track did.
+    out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
+    if (!poor(out.ndt)) consider(out.ndt);
+  }
   if (best) {
     out.ndt = std::move(*best);
     out.match_accepted = true;

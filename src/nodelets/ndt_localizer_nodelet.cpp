@@ -209,8 +209,11 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     if (out.recovered)
       NODELET_WARN("recovered: matching again after %.1f s without an accepted match%s", out.since_last_match,
                    out.global_search ? " (global search)" : "");
-    else if (out.global_search)
+    else if (out.global_search && out.lost)
       NODELET_WARN_THROTTLE(2.0, "lost: global search around the last pose found nothing: %s",
+                            out.global_search_reason.c_str());
+    else if (out.global_search && !out.global_search_reason.empty())
+      NODELET_INFO_THROTTLE(2.0, "global search around the last pose refused (%s); the match from the last pose fits",
                             out.global_search_reason.c_str());
     if (out.lost)
       NODELET_WARN_THROTTLE(2.0, "lost: no acceptable match for %.1f s (NVTL %.2f); %s", out.since_last_match,
