@@ -172,7 +172,7 @@ class Localizer {
   /// Angular velocity of the base [rad/s, base frame] at `stamp` [s]. Scan thread only.
   void addGyro(double stamp, const Eigen::Vector3d& angular_velocity);
   /// A full IMU sample (IMU frame, see fusion.window.base_T_imu): its rate feeds the gyro prediction and, with
-  /// fusion kSlidingWindow, the sample feeds the window. Scan thread only.
+  /// the window running (fusion sliding_window, or auto with a specific force), the sample feeds it. Scan thread only.
   void addImu(const ImuSample& sample);
   /// The fusion: IMU extrinsic from TF, wheel odometry, block switches, warnings. Scan thread only.
   FusionTracker& fusion() { return fusion_; }

@@ -20,6 +20,7 @@ ImuSample imuSampleFromMsg(const sensor_msgs::Imu& msg) {
   s.accel = {msg.linear_acceleration.x, msg.linear_acceleration.y, msg.linear_acceleration.z};
   s.gyro_variance = meanVariance(msg.angular_velocity_covariance);
   s.accel_variance = meanVariance(msg.linear_acceleration_covariance);
+  s.has_accel = msg.linear_acceleration_covariance[0] != -1.0;
   return s;
 }
 

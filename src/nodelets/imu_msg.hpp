@@ -9,7 +9,8 @@ namespace grid_puzzle_localization {
 
 /// The rates and specific force of `msg` in its own frame. The variances are the mean of each covariance's
 /// diagonal; a covariance marked unknown (all zeros, or element 0 at -1, as sensor_msgs/Imu defines) gives a
-/// negative variance, so the window uses its configured noise densities (and says so).
+/// negative variance, so the window uses its configured noise densities (and says so). A linear acceleration
+/// covariance with element 0 at -1 also means the IMU gives no specific force (ImuSample::has_accel false).
 ImuSample imuSampleFromMsg(const sensor_msgs::Imu& msg);
 
 }  // namespace grid_puzzle_localization

@@ -69,9 +69,9 @@ std::optional<NdtSearchMethod> searchMethod(const std::string& text) {
   return method;
 }
 
-// fusion/mode first: the window's parameters are checked only when it runs.
+// fusion/mode first: the window's parameters are checked only when it may run.
 void loadFusion(const ros::NodeHandle& pnh, CheckedLoader& load, FusionConfig& f, LocalizerRosParams& p) {
-  loadChoice(pnh, "fusion/mode", parseFusionMode, "none or sliding_window", f.mode);
+  loadChoice(pnh, "fusion/mode", parseFusionMode, "none, sliding_window or auto", f.mode);
   load("fusion/ndt_covariance_scale", f.ndt_covariance_scale);
   SlidingWindowConfig& w = f.window;
   load("fusion/window/gravity", w.gravity);

@@ -81,7 +81,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     points_sub_ = mt_nh.subscribe("points", 5, &NdtLocalizerNodelet::onPointsArrived, this);
     initial_pose_sub_ = nh.subscribe("initialpose", 1, &NdtLocalizerNodelet::onInitialPose, this);
     imu_sub_ = nh.subscribe("imu", 200, &NdtLocalizerNodelet::onImu, this);
-    if (localizer_->fusion().enabled())
+    if (localizer_->fusion().mayRun())
       odom_in_sub_ = nh.subscribe("odom_in", 50, &NdtLocalizerNodelet::onOdometryIn, this);
     hint_sub_ = nh.subscribe("initialpose_hint", 1, &NdtLocalizerNodelet::onHint, this);
     global_srv_ = pnh.advertiseService("global_localize", &NdtLocalizerNodelet::onGlobalLocalize, this);

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <random>
 
+#include "grid_puzzle_localization/fusion/fusion_tracker.hpp"
 #include "grid_puzzle_localization/fusion/sliding_window.hpp"
 #include "imu_drive.hpp"
 
@@ -266,4 +267,46 @@ TEST(NdtInformation, YawOnlyUncertaintyStaysAboutTheVerticalAtAnyHeading) {
   EXPECT_NEAR(info(5, 5), 100.0, 1e-3);
   EXPECT_NEAR(info(3, 3), 1e6, 1.0);
   EXPECT_NEAR(info(4, 4), 1e6, 1.0);
+}
+
+// fusion/mode auto (the default): the window starts with the first IMU sample that carries a specific force. A
+// gyro-only IMU (sensor_msgs/Imu marks the missing acceleration with covariance element 0 at -1) leaves NDT alone;
+// once the window runs, such samples are skipped with a warning instead of being integrated as zero force.
+TEST(FusionTracker, AutoStartsTheWindowWithTheFirstSampleThatHasASpecificForce) {
+  EXPECT_EQ(gpl::FusionConfig().mode, gpl::FusionMode::kAuto);
+  EXPECT_EQ(gpl::parseFusionMode("auto"), gpl::FusionMode::kAuto);
+  gpl::FusionConfig c;
+  c.mode = gpl::FusionMode::kAuto;
+  gpl::FusionTracker tracker(c);
+  EXPECT_FALSE(tracker.enabled());
+  EXPECT_TRUE(tracker.mayRun());
+  std::mt19937 rng(3);
+  const ImuErrors exact;
+  const Eigen::Isometry3d pose = drive(0.0).pose;
+  const gpl::Matrix6d ndt_covariance = information(0.05, 0.005).inverse();
+  int next_imu = 0;
+  auto feed = [&](double until, bool has_accel) {
+    for (; next_imu / kImuRate <= until + 1e-9; ++next_imu) {
+      gpl::ImuSample s = imuSample(drive, next_imu / kImuRate, exact, rng);
+      s.has_accel = has_accel;
+      tracker.addImu(s);
+    }
+  };
+  feed(0.2, false);
+  EXPECT_FALSE(tracker.enabled());
+  EXPECT_FALSE(tracker.update(0.2, false, &pose, ndt_covariance).has_value());
+  EXPECT_TRUE(tracker.takeWarnings().empty());
+  feed(0.3, true);
+  ASSERT_TRUE(tracker.enabled());
+  const Eigen::Isometry3d at_03 = drive(0.3).pose;
+  ASSERT_TRUE(tracker.update(0.3, false, &at_03, ndt_covariance).has_value());
+  EXPECT_EQ(tracker.states(), 1u);
+  feed(0.4, false);
+  EXPECT_TRUE(anyWarningContains(tracker.takeWarnings(), "no specific force"));
+
+  c.mode = gpl::FusionMode::kNone;
+  gpl::FusionTracker none(c);
+  EXPECT_FALSE(none.mayRun());
+  none.addImu(imuSample(drive, 0.0, exact, rng));
+  EXPECT_FALSE(none.enabled());
 }

@@ -15,23 +15,24 @@
 
 namespace grid_puzzle_localization {
 
-/// Pose tracking past the NDT match: none (NDT with the constant-velocity prediction) or the sliding-window
-/// factor graph with IMU preintegration (fusion/sliding_window.hpp).
-enum class FusionMode { kNone, kSlidingWindow };
+/// Pose tracking past the NDT match: none (NDT with the constant-velocity prediction), the sliding-window factor
+/// graph with IMU preintegration (fusion/sliding_window.hpp), or auto: the window from the first IMU sample that
+/// carries a specific force (a 6-axis IMU is configured), NDT alone until then.
+enum class FusionMode { kNone, kSlidingWindow, kAuto };
 const char* toString(FusionMode mode);
-/// "none" or "sliding_window"; nothing for anything else.
+/// "none", "sliding_window" or "auto"; nothing for anything else.
 std::optional<FusionMode> parseFusionMode(const std::string& name);
 
 struct FusionConfig {
-  FusionMode mode = FusionMode::kNone;
-  SlidingWindowConfig window;  ///< used when mode is kSlidingWindow; window.base_T_imu also turns the gyro
+  FusionMode mode = FusionMode::kAuto;
+  SlidingWindowConfig window;  ///< used when the window runs; window.base_T_imu also turns the gyro
   /// > 0: multiplies covariance.scale for the NDT covariance that weighs a match in the window (ndtCovariance).
   /// The Hessian overstates what a scan fixes where the scene is degenerate: a voxel's Gaussian on a wall spans
   /// the voxel along it, so every wall point adds curvature along a tunnel that nothing constrains. Measured in
   /// the simulated corridor (docs/fusion.md): 1 lets matches that repeat the prediction pin the window.
   double ndt_covariance_scale = 100.0;
 
-  /// Empty when usable (the window is checked only when it is used).
+  /// Empty when usable (the window is checked only when it may run).
   std::string validate() const;
 };
 
@@ -40,11 +41,16 @@ class FusionTracker {
   /// Throws std::invalid_argument naming the bad values when config.validate() is not empty.
   explicit FusionTracker(const FusionConfig& config);
   ~FusionTracker();
+  /// The window runs (sliding_window, or auto once an IMU sample with a specific force came).
   bool enabled() const { return window_ != nullptr; }
+  /// The window runs or may start (auto): odometry input is worth subscribing to.
+  bool mayRun() const { return mode_ != FusionMode::kNone; }
   /// The IMU's pose in base_link (from TF once the IMU frame is known); applies to the samples that follow.
   const Eigen::Isometry3d& baseTImu() const { return base_T_imu_; }
   void setBaseTImu(const Eigen::Isometry3d& base_T_imu);
 
+  /// A sample without a specific force (ImuSample::has_accel false) is not the window's: auto does not start the
+  /// window with it, and a running window skips it with a warning.
   void addImu(const ImuSample& sample);
   /// Wheel odometry odom_T_base at `stamp` [s] (relative pose factors between consecutive states).
   void addOdometry(double stamp, const Eigen::Isometry3d& odom_T_base);
@@ -64,7 +70,7 @@ class FusionTracker {
   void mapSwitched();
   /// Forgets the states (localizer reset, initial pose, global localization); buffered IMU samples stay.
   void reset();
-  /// The window's warnings since the last call (IMU dropouts, refused stamps, no IMU covariance...).
+  /// The warnings since the last call (IMU dropouts, refused stamps, no IMU covariance, no specific force...).
   std::vector<std::string> takeWarnings();
   /// States in the window (0 when disabled).
   std::size_t states() const { return window_ ? window_->size() : 0; }
@@ -72,9 +78,12 @@ class FusionTracker {
   const WindowUpdateReport* lastReport() const { return window_ ? &window_->lastReport() : nullptr; }
 
  private:
+  FusionMode mode_;
+  SlidingWindowConfig window_config_;
   Eigen::Isometry3d base_T_imu_;
   double ndt_covariance_scale_;
   std::unique_ptr<SlidingWindow> window_;
+  std::vector<std::string> warnings_;  ///< the tracker's own, before the window's
 };
 
 }  // namespace grid_puzzle_localization

@@ -62,6 +62,7 @@ struct ImuSample {
   Eigen::Vector3d accel = Eigen::Vector3d::Zero();  ///< specific force [m/s^2]
   double gyro_variance = -1.0;                      ///< [rad^2/s^2] per axis of one sample
   double accel_variance = -1.0;                     ///< [m^2/s^4] per axis of one sample
+  bool has_accel = true;  ///< false: the IMU gives no specific force (sensor_msgs/Imu: covariance element 0 at -1)
 };
 
 /// The estimate of one state.

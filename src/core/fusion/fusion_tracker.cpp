@@ -2,14 +2,25 @@
 
 #include <cmath>
 #include <stdexcept>
+#include <utility>
 
 namespace grid_puzzle_localization {
 
-const char* toString(FusionMode mode) { return mode == FusionMode::kSlidingWindow ? "sliding_window" : "none"; }
+const char* toString(FusionMode mode) {
+  switch (mode) {
+    case FusionMode::kSlidingWindow:
+      return "sliding_window";
+    case FusionMode::kAuto:
+      return "auto";
+    default:
+      return "none";
+  }
+}
 
 std::optional<FusionMode> parseFusionMode(const std::string& name) {
   if (name == "none") return FusionMode::kNone;
   if (name == "sliding_window") return FusionMode::kSlidingWindow;
+  if (name == "auto") return FusionMode::kAuto;
   return std::nullopt;
 }
 
@@ -17,14 +28,19 @@ std::string FusionConfig::validate() const {
   std::string err;
   if (!(ndt_covariance_scale > 0.0) || !std::isfinite(ndt_covariance_scale))
     err += "fusion/ndt_covariance_scale must be > 0 (got " + std::to_string(ndt_covariance_scale) + "); ";
-  if (mode == FusionMode::kSlidingWindow) return err + window.validate();
+  if (mode != FusionMode::kNone) return err + window.validate();
   return err + (window.base_T_imu.matrix().allFinite() ? "" : "fusion/window/base_T_imu must be finite; ");
 }
 
 FusionTracker::FusionTracker(const FusionConfig& config)
-    : base_T_imu_(config.window.base_T_imu),
+    : mode_(config.mode),
+      window_config_(config.window),
+      base_T_imu_(config.window.base_T_imu),
       ndt_covariance_scale_(config.ndt_covariance_scale),
-      window_(config.mode == FusionMode::kSlidingWindow ? std::make_unique<SlidingWindow>(config.window) : nullptr) {}
+      window_(config.mode == FusionMode::kSlidingWindow ? std::make_unique<SlidingWindow>(config.window) : nullptr) {
+  const std::string err = config.validate();
+  if (!err.empty()) throw std::invalid_argument("fusion config: " + err);
+}
 
 FusionTracker::~FusionTracker() = default;
 
@@ -35,6 +51,17 @@ void FusionTracker::setBaseTImu(const Eigen::Isometry3d& base_T_imu) {
 }
 
 void FusionTracker::addImu(const ImuSample& sample) {
+  if (!sample.has_accel) {
+    if (window_)
+      warnings_.push_back("IMU sample at " + std::to_string(sample.stamp) +
+                          " s has no specific force (linear_acceleration_covariance[0] = -1): the window needs a "
+                          "6-axis IMU; sample skipped");
+    return;
+  }
+  if (!window_ && mode_ == FusionMode::kAuto) {
+    window_config_.base_T_imu = base_T_imu_;
+    window_ = std::make_unique<SlidingWindow>(window_config_);
+  }
   if (window_) window_->addImu(sample);
 }
 
@@ -70,7 +97,10 @@ void FusionTracker::reset() {
 }
 
 std::vector<std::string> FusionTracker::takeWarnings() {
-  return window_ ? window_->takeWarnings() : std::vector<std::string>();
+  std::vector<std::string> out = std::exchange(warnings_, {});
+  if (window_)
+    for (std::string& warning : window_->takeWarnings()) out.push_back(std::move(warning));
+  return out;
 }
 
 }  // namespace grid_puzzle_localization

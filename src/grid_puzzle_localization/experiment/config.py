@@ -10,7 +10,7 @@ from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.provider.window import PRESETS as PAPER_WINDOWS
 
 MODES = ("global", "grid_puzzle", "block_map")
-FUSIONS = ("none", "sliding_window")  # the localizer's fusion/mode
+FUSIONS = ("none", "sliding_window", "auto")  # the localizer's fusion/mode
 
 
 @dataclass(frozen=True)
