@@ -340,32 +340,41 @@ namespace {
 // kTrimPeriod, also when it goes idle with freed memory not yet handed back.
 constexpr auto kTrimPeriod = std::chrono::seconds(2);
 
-void returnFreedMemory() {
+// When the worker hands freed heap back to the system: right after the first change, then at most once per
+// kTrimPeriod.
+class HeapTrimmer {
+ public:
+  /// Memory was freed: a trim is due once the period since the last one is over.
+  void freed() { pending_ = true; }
+  bool pending() const { return pending_; }
+  Clock::time_point due() const { return last_ + kTrimPeriod; }
+  void trimIfDue() {
+    if (!pending_ || Clock::now() < due()) return;
 #if defined(__GLIBC__)
-  malloc_trim(0);
+    malloc_trim(0);
 #endif
-}
+    last_ = Clock::now();
+    pending_ = false;
+  }
+
+ private:
+  Clock::time_point last_;  // the epoch: the first change is trimmed at once
+  bool pending_ = false;
+};
 
 }  // namespace
 
 void MapUpdateWorker::run() {
   NdtTarget target(params_);
   std::unique_lock<std::mutex> lock(mutex_);
-  Clock::time_point last_trim;  // the epoch: the first change is trimmed at once
-  bool trim_pending = false;    // memory was freed since the last trim
-  const auto trimIfDue = [&] {
-    if (!trim_pending || Clock::now() - last_trim < kTrimPeriod) return;
-    returnFreedMemory();
-    last_trim = Clock::now();
-    trim_pending = false;
-  };
+  HeapTrimmer trimmer;
   for (;;) {
     const auto has_work = [this] { return stop_ || !queue_.empty() || !retired_.empty(); };
-    if (!trim_pending) {
+    if (!trimmer.pending()) {
       wake_.wait(lock, has_work);
-    } else if (!wake_.wait_until(lock, last_trim + kTrimPeriod, has_work)) {
+    } else if (!wake_.wait_until(lock, trimmer.due(), has_work)) {
       lock.unlock();
-      trimIfDue();
+      trimmer.trimIfDue();
       lock.lock();
       continue;
     }
@@ -418,8 +427,8 @@ void MapUpdateWorker::run() {
     lock.unlock();
     batch.clear();
     readAhead();
-    trim_pending = true;
-    trimIfDue();
+    trimmer.freed();
+    trimmer.trimIfDue();
     lock.lock();
     prefetching_ = false;
     stats_.tiles_read = totals_.tiles_read;

@@ -83,3 +83,13 @@ def test_a_recording_that_was_not_simulated_is_a_clear_error(tiny, tmp_path, cap
         (tmp_path / "rec" / name).write_bytes((tiny / name).read_bytes())
     assert cli.main(["map-drift", str(tmp_path / "rec")]) == 2
     assert "is not a simulated scenario" in capsys.readouterr().err
+
+
+def test_a_trajectory_of_another_time_span_is_a_clear_error(tiny, tmp_path, capsys):
+    rows = [line.split() for line in (tiny / "ground_truth.tum").read_text().splitlines() if line[:1] != "#"]
+    shifted = [f"{float(v[0]) + 1e6:.9f} " + " ".join(v[1:]) for v in rows]
+    other = tmp_path / "other_run.tum"
+    other.write_text("\n".join(shifted) + "\n")
+    assert cli.main(["map-drift", str(tiny), str(other)]) == 2
+    err = capsys.readouterr().err
+    assert "other_run.tum" in err and "is it a run of" in err

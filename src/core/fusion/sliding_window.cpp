@@ -148,6 +148,10 @@ SlidingWindow::Interval SlidingWindow::integrate(double t0, double t1, const Sta
   Interval out{ImuPreintegration(from.bias()), 0.0, false};
   const ImuBias bias = from.bias();
   const Eigen::Matrix3d r0 = from.rotation().toRotationMatrix();
+  // The specific force an IMU at rest with attitude r measures: gravity alone, plus the accelerometer bias.
+  auto force_at_rest = [&](const Eigen::Matrix3d& r) -> Eigen::Vector3d {
+    return r.transpose() * -gravity_ + bias.accel;
+  };
   auto next = std::upper_bound(imu_.begin(), imu_.end(), t0, [](double t, const BaseSample& s) { return t < s.stamp; });
   // The sample held at t: the last one at or before it, or the first one if it follows t0 closely.
   const BaseSample* held = next == imu_.begin() ? nullptr : &*(next - 1);
@@ -174,8 +178,7 @@ SlidingWindow::Interval SlidingWindow::integrate(double t0, double t1, const Sta
       // Dropout: keep turning at the last rate and assume no acceleration in the map frame.
       end = std::min(end, t + kGapStep);
       const double dt = end - t;
-      const Eigen::Vector3d accel =
-          (r0 * out.pre.deltaRotation().toRotationMatrix()).transpose() * -gravity_ + bias.accel;
+      const Eigen::Vector3d accel = force_at_rest(r0 * out.pre.deltaRotation().toRotationMatrix());
       out.pre.integrate(dt, last_gyro, accel, config_.gap_gyro_density * config_.gap_gyro_density / dt,
                         config_.gap_accel_density * config_.gap_accel_density / dt);
       out.gap += dt;
@@ -194,7 +197,7 @@ SlidingWindow::Interval SlidingWindow::integrate(double t0, double t1, const Sta
     const Eigen::Vector3d mean = accel_sum / in_interval;
     const Eigen::Vector3d var = (accel_sq / in_interval - mean.cwiseProduct(mean)).cwiseMax(0.0);
     // Setting off smoothly keeps the spread small; the mean then departs from what gravity alone gives at rest.
-    const Eigen::Vector3d at_rest = r0.transpose() * -gravity_ + bias.accel;
+    const Eigen::Vector3d at_rest = force_at_rest(r0);
     out.stationary = max_rate < config_.zupt_max_gyro && var.maxCoeff() < std::pow(config_.zupt_max_accel_std, 2) &&
                      (mean - at_rest).norm() < config_.zupt_max_accel_std &&
                      from.velocity().norm() < config_.zupt_max_speed;

@@ -59,7 +59,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ndt-threads", type=int, help="NDT threads, 0 = all cores (default: the localizer's)")
     parser.add_argument(
         "--fusion", choices=FUSIONS,
-        help="pose tracking past the NDT match: sliding_window fuses the bag's imu (default: the localizer's, none)",
+        help="pose tracking past the NDT match: sliding_window fuses the bag's imu; auto does when it has a specific "
+        "force (default: the localizer's, auto)",
     )  # fmt: skip
     parser.add_argument(
         "--initial-pose", type=float, nargs=6, metavar=("X", "Y", "Z", "ROLL", "PITCH", "YAW"),

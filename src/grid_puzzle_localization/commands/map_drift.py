@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.evaluation.metrics import ErrorStats
+from grid_puzzle_localization.evaluation.metrics import ErrorStats, interpolated_reference
 from grid_puzzle_localization.evaluation.trajectory import read_tum
+from grid_puzzle_localization.experiment.config import ExperimentConfig
 from grid_puzzle_localization.experiment.scenario import read_scenario
 from grid_puzzle_localization.sim.map_drift import DEFAULT_RADIUS, map_displacement, split_errors
 from grid_puzzle_localization.sim.scenario import ScenarioConfig, mapping_estimate, runs
@@ -46,12 +47,12 @@ def run(args: argparse.Namespace) -> int:
     print(f"| the map along the ground truth | {len(along)} | | {_cm(ErrorStats.of(along))} | |")
     for path in args.trajectories:
         track = read_tum(path)
-        inside = (track.t >= truth.t[0]) & (track.t <= truth.t[-1])
-        if not inside.any():
-            raise UserError(f"{path}: no pose within the ground truth's time span; is it a run of {args.scenario}?")
-        track = type(track)(track.t[inside], track.xyz[inside], track.quat[inside])
-        at = np.stack([np.interp(track.t, truth.t, truth.xyz[:, k]) for k in range(3)], axis=1)
-        split = split_errors(at, track, map_displacement(mapping, estimate, at, args.radius))
+        try:
+            at = interpolated_reference(truth, track, ExperimentConfig.max_time_diff_s)
+        except UserError as e:
+            raise UserError(f"{path}: {e}; is it a run of {args.scenario}?") from None
+        track = type(track)(track.t[at.index], track.xyz[at.index], track.quat[at.index])
+        split = split_errors(at.xyz, track, map_displacement(mapping, estimate, at.xyz, args.radius))
         print(
             f"| {path} | {split.against_truth.pairs} | {_cm(split.against_truth)} | {_cm(split.map_displacement)} |"
             f" {_cm(split.tracker)} |"

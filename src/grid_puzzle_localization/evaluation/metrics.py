@@ -91,11 +91,18 @@ def paired_errors(reference: Trajectory, estimate: Trajectory, max_diff: float) 
     return PairedErrors(t, trans, rot)
 
 
-def interpolated_errors(reference: Trajectory, estimate: Trajectory, max_diff: float) -> PairedErrors:
-    """Errors of each ``estimate`` pose against ``reference`` interpolated at its time (linear in
-    position, slerp in rotation): for a dense ground truth (e.g. 100 Hz), so the pairing's time
-    offset adds no error. Poses outside the reference's time span, or farther than ``max_diff``
-    seconds from the nearest reference pose, are skipped."""
+@dataclass(frozen=True)
+class InterpolatedReference:
+    index: np.ndarray  # (k,) the ``estimate`` poses paired
+    xyz: np.ndarray  # (k, 3) the reference's position at their times
+    quat: np.ndarray  # (k, 4) its orientation there, x y z w
+
+
+def interpolated_reference(reference: Trajectory, estimate: Trajectory, max_diff: float) -> InterpolatedReference:
+    """``reference`` interpolated at the time of each ``estimate`` pose (linear in position, slerp in
+    rotation): for a dense ground truth (e.g. 100 Hz), so the pairing's time offset adds no error.
+    Poses outside the reference's time span, or farther than ``max_diff`` seconds from the nearest
+    reference pose, are skipped; none left is a UserError."""
     if len(reference) < 2:
         raise UserError("interpolating a reference trajectory needs at least two poses")
     ie, _ = associate(estimate.t, reference.t, max_diff)
@@ -106,8 +113,15 @@ def interpolated_errors(reference: Trajectory, estimate: Trajectory, max_diff: f
         raise _no_pairs(reference, estimate, max_diff)
     xyz = np.stack([np.interp(t, reference.t, reference.xyz[:, k]) for k in range(3)], axis=1)
     quat = Slerp(reference.t, Rotation.from_quat(reference.quat))(t).as_quat()
-    trans = np.linalg.norm(estimate.xyz[ie] - xyz, axis=1)
-    return PairedErrors(t, trans, rotation_angle_deg(quat, estimate.quat[ie]))
+    return InterpolatedReference(ie, xyz, quat)
+
+
+def interpolated_errors(reference: Trajectory, estimate: Trajectory, max_diff: float) -> PairedErrors:
+    """Errors of each ``estimate`` pose against ``reference`` interpolated at its time
+    (``interpolated_reference``)."""
+    at = interpolated_reference(reference, estimate, max_diff)
+    trans = np.linalg.norm(estimate.xyz[at.index] - at.xyz, axis=1)
+    return PairedErrors(estimate.t[at.index], trans, rotation_angle_deg(at.quat, estimate.quat[at.index]))
 
 
 def position_rmse(a: Trajectory, b: Trajectory, max_diff: float) -> float:
