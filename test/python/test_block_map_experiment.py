@@ -19,8 +19,8 @@ def summary(tmp_path_factory):
     sim = ["simulate", "courtyard", "--scale", "0.3", "--duration", str(SECONDS), "--seed", "0"]
     # In child processes, as a user runs them (the simulator's threads stay out of the test process).
     subprocess.run([*GPM, *sim, "-o", str(d / "scenario"), "--quiet"], check=True)
-    (d / "out").mkdir()
-    experiment = ["experiment", str(d / "scenario"), "-o", str(d / "out"), "--modes", "block_map"]
+    # A new output directory and tiles kept elsewhere: the experiment creates the directory for its block maps.
+    experiment = ["experiment", str(d / "scenario"), "-o", str(d / "out"), "--modes", "block_map", "--tiles", str(d / "tiles")]
     subprocess.run([*GPM, *experiment, "--block-size", "4", "--ndt-threads", "2", "--settle", "1"], check=True)
     return json.loads((d / "out" / "summary.json").read_text())
 

@@ -124,6 +124,7 @@ def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
 def run(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     cfg.check()
+    cfg.out_dir.mkdir(parents=True, exist_ok=True)
     tile_dir = cfg.tiles or cfg.out_dir / f"tiles_s{cfg.window.grid_size_m:g}"
     tiles = ensure_tiles(cfg.global_map, tile_dir, cfg.window.grid_size_m)
     blocks = submaps = None
