@@ -20,8 +20,9 @@ def summary(tmp_path_factory):
     # In child processes, as a user runs them (the simulator's threads stay out of the test process).
     subprocess.run([*GPM, *sim, "-o", str(d / "scenario"), "--quiet"], check=True)
     # A new output directory and tiles kept elsewhere: the experiment creates the directory for its block maps.
-    experiment = ["experiment", str(d / "scenario"), "-o", str(d / "out"), "--modes", "block_map", "--tiles", str(d / "tiles")]
-    subprocess.run([*GPM, *experiment, "--block-size", "4", "--ndt-threads", "2", "--settle", "1"], check=True)
+    experiment = ["experiment", str(d / "scenario"), "-o", str(d / "out"), "--modes", "block_map"]
+    options = ["--tiles", str(d / "tiles"), "--block-size", "4", "--ndt-threads", "2", "--settle", "1"]
+    subprocess.run([*GPM, *experiment, *options], check=True)
     return json.loads((d / "out" / "summary.json").read_text())
 
 
