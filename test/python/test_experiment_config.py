@@ -94,5 +94,5 @@ def test_fusion_reaches_the_localizer_launch(tmp_path):
 
 def test_unknown_fusion_is_refused(tmp_path):
     cfg = config_from_args(build_parser().parse_args(["experiment", str(scenario_dir(tmp_path)), "-o", "out"]))
-    with pytest.raises(UserError, match="unknown fusion 'ukf' \\(use none, sliding_window\\)"):
+    with pytest.raises(UserError, match="unknown fusion 'ukf' \\(use none, sliding_window, auto\\)"):
         dataclasses.replace(cfg, fusion="ukf").check()
