@@ -213,7 +213,8 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       NODELET_WARN_THROTTLE(2.0, "lost: global search around the last pose found nothing: %s",
                             out.global_search_reason.c_str());
     else if (out.global_search && !out.global_search_reason.empty())
-      NODELET_INFO_THROTTLE(2.0, "global search around the last pose refused (%s); the match from the last pose fits",
+      NODELET_INFO_THROTTLE(2.0,
+                            "global search around the last pose refused (%s); the match from the prediction stands",
                             out.global_search_reason.c_str());
     if (out.lost)
       NODELET_WARN_THROTTLE(2.0, "lost: no acceptable match for %.1f s (NVTL %.2f); %s", out.since_last_match,

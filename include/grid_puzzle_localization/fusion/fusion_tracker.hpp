@@ -46,7 +46,7 @@ class FusionTracker {
   /// The window runs or may start (auto): odometry input is worth subscribing to.
   bool mayRun() const { return mode_ != FusionMode::kNone; }
   /// The IMU's pose in base_link (from TF once the IMU frame is known); applies to the samples that follow.
-  const Eigen::Isometry3d& baseTImu() const { return base_T_imu_; }
+  const Eigen::Isometry3d& baseTImu() const { return window_config_.base_T_imu; }
   void setBaseTImu(const Eigen::Isometry3d& base_T_imu);
 
   /// A sample without a specific force (ImuSample::has_accel false) is not the window's: auto does not start the
@@ -79,8 +79,7 @@ class FusionTracker {
 
  private:
   FusionMode mode_;
-  SlidingWindowConfig window_config_;
-  Eigen::Isometry3d base_T_imu_;
+  SlidingWindowConfig window_config_;  // base_T_imu kept current: a window started later (auto) gets it
   double ndt_covariance_scale_;
   std::unique_ptr<SlidingWindow> window_;
   std::vector<std::string> warnings_;  ///< the tracker's own, before the window's

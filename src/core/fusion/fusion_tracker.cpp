@@ -6,21 +6,23 @@
 
 namespace grid_puzzle_localization {
 
+namespace {
+
+// The parameter value of each mode, for both directions.
+constexpr std::pair<FusionMode, const char*> kModeNames[] = {
+    {FusionMode::kNone, "none"}, {FusionMode::kSlidingWindow, "sliding_window"}, {FusionMode::kAuto, "auto"}};
+
+}  // namespace
+
 const char* toString(FusionMode mode) {
-  switch (mode) {
-    case FusionMode::kSlidingWindow:
-      return "sliding_window";
-    case FusionMode::kAuto:
-      return "auto";
-    default:
-      return "none";
-  }
+  for (const auto& [m, name] : kModeNames)
+    if (m == mode) return name;
+  return "none";
 }
 
-std::optional<FusionMode> parseFusionMode(const std::string& name) {
-  if (name == "none") return FusionMode::kNone;
-  if (name == "sliding_window") return FusionMode::kSlidingWindow;
-  if (name == "auto") return FusionMode::kAuto;
+std::optional<FusionMode> parseFusionMode(const std::string& text) {
+  for (const auto& [mode, name] : kModeNames)
+    if (text == name) return mode;
   return std::nullopt;
 }
 
@@ -35,7 +37,6 @@ std::string FusionConfig::validate() const {
 FusionTracker::FusionTracker(const FusionConfig& config)
     : mode_(config.mode),
       window_config_(config.window),
-      base_T_imu_(config.window.base_T_imu),
       ndt_covariance_scale_(config.ndt_covariance_scale),
       window_(config.mode == FusionMode::kSlidingWindow ? std::make_unique<SlidingWindow>(config.window) : nullptr) {
   const std::string err = config.validate();
@@ -46,7 +47,7 @@ FusionTracker::~FusionTracker() = default;
 
 void FusionTracker::setBaseTImu(const Eigen::Isometry3d& base_T_imu) {
   if (!base_T_imu.matrix().allFinite()) throw std::invalid_argument("the IMU extrinsic base_T_imu must be finite");
-  base_T_imu_ = base_T_imu;
+  window_config_.base_T_imu = base_T_imu;
   if (window_) window_->setBaseTImu(base_T_imu);
 }
 
@@ -58,10 +59,7 @@ void FusionTracker::addImu(const ImuSample& sample) {
                           "6-axis IMU; sample skipped");
     return;
   }
-  if (!window_ && mode_ == FusionMode::kAuto) {
-    window_config_.base_T_imu = base_T_imu_;
-    window_ = std::make_unique<SlidingWindow>(window_config_);
-  }
+  if (!window_ && mode_ == FusionMode::kAuto) window_ = std::make_unique<SlidingWindow>(window_config_);
   if (window_) window_->addImu(sample);
 }
 
