@@ -87,7 +87,7 @@ void Localizer::addGyro(double stamp, const Eigen::Vector3d& angular_velocity) {
 }
 
 void Localizer::addImu(const ImuSample& sample) {
-  addGyro(sample.stamp, fusion_.baseTImu().rotation() * sample.gyro);
+  if (sample.has_gyro) addGyro(sample.stamp, fusion_.baseTImu().rotation() * sample.gyro);
   fusion_.addImu(sample);
 }
 
@@ -362,9 +362,9 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     }
   }
   if (!best && !fresh && !velocity_trusted && !long_gap && elapsed >= 0.0) {
-    // Before a velocity is measured (the scans after a start or a recovery) the search decides. A scene it finds
-    // ambiguous (a tunnel fits many places along itself) the match from the last accepted pose may still fit: it is
-    // taken when it fits as well as the track did.
+    // Before a velocity is measured (the scans after a start or a recovery) the search decides. When it refuses a
+    // scene as ambiguous (a tunnel fits many places along itself), the match from the last accepted pose is still
+    // tried, and taken when it fits as well as the track did.
     out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
     if (!poor(out.ndt)) consider(out.ndt);
   }

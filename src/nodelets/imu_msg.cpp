@@ -21,6 +21,7 @@ ImuSample imuSampleFromMsg(const sensor_msgs::Imu& msg) {
   s.gyro_variance = meanVariance(msg.angular_velocity_covariance);
   s.accel_variance = meanVariance(msg.linear_acceleration_covariance);
   s.has_accel = msg.linear_acceleration_covariance[0] != -1.0;
+  s.has_gyro = msg.angular_velocity_covariance[0] != -1.0;
   return s;
 }
 

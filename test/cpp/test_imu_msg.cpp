@@ -32,11 +32,14 @@ TEST(ImuMsg, UnknownCovarianceGivesNegativeVariance) {
   EXPECT_DOUBLE_EQ(s.accel_variance, 1e-4);
 }
 
-// sensor_msgs/Imu: element 0 at -1 means no estimate at all. Without a specific force the window cannot run on
-// the IMU; all zeros only means the covariance is unknown.
-TEST(ImuMsg, NoAccelerationEstimateIsMarked) {
+// sensor_msgs/Imu: element 0 at -1 means no estimate at all. Without a specific force or rates the window cannot
+// run on the IMU; all zeros only means the covariance is unknown.
+TEST(ImuMsg, NoAccelerationOrRateEstimateIsMarked) {
   sensor_msgs::Imu msg;
   EXPECT_TRUE(gpl::imuSampleFromMsg(msg).has_accel);
   msg.linear_acceleration_covariance[0] = -1.0;
   EXPECT_FALSE(gpl::imuSampleFromMsg(msg).has_accel);
+  EXPECT_TRUE(gpl::imuSampleFromMsg(msg).has_gyro);
+  msg.angular_velocity_covariance[0] = -1.0;
+  EXPECT_FALSE(gpl::imuSampleFromMsg(msg).has_gyro);
 }

@@ -269,10 +269,11 @@ TEST(NdtInformation, YawOnlyUncertaintyStaysAboutTheVerticalAtAnyHeading) {
   EXPECT_NEAR(info(4, 4), 1e6, 1.0);
 }
 
-// fusion/mode auto (the default): the window starts with the first IMU sample that carries a specific force. A
-// gyro-only IMU (sensor_msgs/Imu marks the missing acceleration with covariance element 0 at -1) leaves NDT alone;
-// once the window runs, such samples are skipped with a warning instead of being integrated as zero force.
-TEST(FusionTracker, AutoStartsTheWindowWithTheFirstSampleThatHasASpecificForce) {
+// fusion/mode auto (the default): the window starts with the first IMU sample that carries a specific force and
+// rates. A gyro-only or accelerometer-only IMU (sensor_msgs/Imu marks the missing part with covariance element 0 at
+// -1) leaves NDT alone; once the window runs, such samples are skipped with a warning instead of being integrated as
+// zeros.
+TEST(FusionTracker, AutoStartsTheWindowWithTheFirstSampleThatHasASpecificForceAndRates) {
   EXPECT_EQ(gpl::FusionConfig().mode, gpl::FusionMode::kAuto);
   EXPECT_EQ(gpl::parseFusionMode("auto"), gpl::FusionMode::kAuto);
   gpl::FusionConfig c;
@@ -285,24 +286,29 @@ TEST(FusionTracker, AutoStartsTheWindowWithTheFirstSampleThatHasASpecificForce) 
   const Eigen::Isometry3d pose = drive(0.0).pose;
   const gpl::Matrix6d ndt_covariance = information(0.05, 0.005).inverse();
   int next_imu = 0;
-  auto feed = [&](double until, bool has_accel) {
+  auto feed = [&](double until, bool has_accel, bool has_gyro) {
     for (; next_imu / kImuRate <= until + 1e-9; ++next_imu) {
       gpl::ImuSample s = imuSample(drive, next_imu / kImuRate, exact, rng);
       s.has_accel = has_accel;
+      s.has_gyro = has_gyro;
       tracker.addImu(s);
     }
   };
-  feed(0.2, false);
+  feed(0.1, false, true);
+  EXPECT_FALSE(tracker.enabled());
+  feed(0.2, true, false);
   EXPECT_FALSE(tracker.enabled());
   EXPECT_FALSE(tracker.update(0.2, false, &pose, ndt_covariance).has_value());
   EXPECT_TRUE(tracker.takeWarnings().empty());
-  feed(0.3, true);
+  feed(0.3, true, true);
   ASSERT_TRUE(tracker.enabled());
   const Eigen::Isometry3d at_03 = drive(0.3).pose;
   ASSERT_TRUE(tracker.update(0.3, false, &at_03, ndt_covariance).has_value());
   EXPECT_EQ(tracker.states(), 1u);
-  feed(0.4, false);
+  feed(0.4, false, true);
   EXPECT_TRUE(anyWarningContains(tracker.takeWarnings(), "no specific force"));
+  feed(0.5, true, false);
+  EXPECT_TRUE(anyWarningContains(tracker.takeWarnings(), "no angular velocity"));
 
   c.mode = gpl::FusionMode::kNone;
   gpl::FusionTracker none(c);

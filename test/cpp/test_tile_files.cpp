@@ -188,9 +188,10 @@ TEST(TileVoxels, EqualTheStatisticsOfAFromScratchBuildOfTheTilesOwnPoints) {
   for (const auto& [k, st] : reference) by_key[{k.x, k.y, k.z}] = st;
   for (std::size_t i = 0; i < tile.voxels.size(); ++i) {
     const auto& [k, st] = tile.voxels[i];
-    if (i > 0)
+    if (i > 0) {
       EXPECT_LT(std::make_tuple(tile.voxels[i - 1].first.x, tile.voxels[i - 1].first.y, tile.voxels[i - 1].first.z),
                 std::make_tuple(k.x, k.y, k.z));
+    }
     const gpl::VoxelStats& o = by_key.at({k.x, k.y, k.z});
     EXPECT_EQ(o.count, st.count);
     for (int a = 0; a < 3; ++a) EXPECT_EQ(o.sum[a], st.sum[a]);

@@ -49,8 +49,8 @@ class FusionTracker {
   const Eigen::Isometry3d& baseTImu() const { return window_config_.base_T_imu; }
   void setBaseTImu(const Eigen::Isometry3d& base_T_imu);
 
-  /// A sample without a specific force (ImuSample::has_accel false) is not the window's: auto does not start the
-  /// window with it, and a running window skips it with a warning.
+  /// A sample without a specific force or without rates (ImuSample::has_accel or has_gyro false) is not the
+  /// window's: auto does not start the window with it, and a running window skips it with a warning.
   void addImu(const ImuSample& sample);
   /// Wheel odometry odom_T_base at `stamp` [s] (relative pose factors between consecutive states).
   void addOdometry(double stamp, const Eigen::Isometry3d& odom_T_base);

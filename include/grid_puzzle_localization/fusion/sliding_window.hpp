@@ -63,6 +63,7 @@ struct ImuSample {
   double gyro_variance = -1.0;                      ///< [rad^2/s^2] per axis of one sample
   double accel_variance = -1.0;                     ///< [m^2/s^4] per axis of one sample
   bool has_accel = true;  ///< false: the IMU gives no specific force (sensor_msgs/Imu: covariance element 0 at -1)
+  bool has_gyro = true;   ///< false: the IMU gives no angular velocity (the same convention)
 };
 
 /// The estimate of one state.

@@ -52,11 +52,12 @@ void FusionTracker::setBaseTImu(const Eigen::Isometry3d& base_T_imu) {
 }
 
 void FusionTracker::addImu(const ImuSample& sample) {
-  if (!sample.has_accel) {
+  if (!sample.has_accel || !sample.has_gyro) {
+    const std::string missing = sample.has_accel ? "angular velocity (angular_velocity_covariance[0] = -1)"
+                                                 : "specific force (linear_acceleration_covariance[0] = -1)";
     if (window_)
-      warnings_.push_back("IMU sample at " + std::to_string(sample.stamp) +
-                          " s has no specific force (linear_acceleration_covariance[0] = -1): the window needs a "
-                          "6-axis IMU; sample skipped");
+      warnings_.push_back("IMU sample at " + std::to_string(sample.stamp) + " s has no " + missing +
+                          ": the window needs a 6-axis IMU; sample skipped");
     return;
   }
   if (!window_ && mode_ == FusionMode::kAuto) window_ = std::make_unique<SlidingWindow>(window_config_);
