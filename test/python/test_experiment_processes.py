@@ -112,6 +112,16 @@ def test_roscore_runs_on_its_own_port_and_stops_cleanly(tmp_path, roscore):
     assert all(gone(p.pid) for p in pids)
 
 
+def test_a_relative_log_dir_keeps_every_ros_log_in_it(tmp_path, monkeypatch):
+    # roslaunch starts rosout in ROS_HOME; a relative ROS_LOG_DIR used to land under ros_home/ again.
+    monkeypatch.chdir(tmp_path)
+    with RosCore("relative/logs"):
+        pass
+    logs = sorted(p.name for p in (tmp_path / "relative" / "logs" / "ros_log").rglob("*.log"))
+    assert "master.log" in logs and "rosout.log" in logs
+    assert not list((tmp_path / "relative" / "logs" / "ros_home").rglob("*.log"))
+
+
 def write_odometry_bag(path, n: int = 40) -> np.ndarray:
     """A bag of Odometry on `odom` at 10 Hz along a known curve; returns the rows t x y z qx qy qz qw."""
     rows = []

@@ -19,13 +19,15 @@ PACKAGE = "grid_puzzle_localization"
 
 def ros_environment(port: int, log_dir: str | os.PathLike) -> dict[str, str]:
     """This process's environment pointed at a master on ``port`` of the loopback interface, with
-    ROS logs under ``log_dir``."""
+    ROS logs under ``log_dir``. The paths are absolute: roslaunch starts nodes in ROS_HOME, where a
+    relative log directory would nest."""
+    log_dir = Path(log_dir).resolve()
     env = dict(os.environ)
     env.update(
         ROS_MASTER_URI=f"http://127.0.0.1:{port}",
         ROS_IP="127.0.0.1",
-        ROS_HOME=str(Path(log_dir) / "ros_home"),
-        ROS_LOG_DIR=str(Path(log_dir) / "ros_log"),
+        ROS_HOME=str(log_dir / "ros_home"),
+        ROS_LOG_DIR=str(log_dir / "ros_log"),
     )
     env.pop("ROS_HOSTNAME", None)
     return env
