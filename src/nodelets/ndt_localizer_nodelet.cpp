@@ -95,7 +95,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     if (!checkMapFrame(msg->header.frame_id, "map_cloud")) return;
     try {
       localizer_->map().submit(MapChange::fullCloud(fromMsg(*msg)));
-      ++map_clouds_;  // after the first, a new cloud is a block switch (block_map mode)
+      ++map_replacements_;
     } catch (const std::invalid_argument& e) {
       NODELET_ERROR("map_cloud: %s", e.what());
     }
@@ -104,7 +104,9 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   void onTileDelta(const TileDelta::ConstPtr& msg) {
     if (!checkMapFrame(msg->header.frame_id, "tile_delta")) return;
     std::optional<MapChange> change = tile_input_->accept(*msg, localizer_->map());
-    if (change) localizer_->map().submit(std::move(*change));
+    if (!change) return;
+    localizer_->map().submit(std::move(*change));
+    if (msg->reset) ++map_replacements_;
   }
 
   bool checkMapFrame(const std::string& frame, const char* topic) {
@@ -196,10 +198,12 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
           params_.time_field.c_str());
     const LocalizerOutput out =
         localizer_->processScan(msg->header.stamp.toSec(), scan, *base_T_sensor, times ? &*times : nullptr);
-    const int clouds = map_clouds_;
-    if (out.map_swapped && clouds != map_clouds_seen_) {
-      if (map_clouds_seen_ > 0) localizer_->fusion().mapSwitched();
-      map_clouds_seen_ = clouds;
+    // A whole map after the first (a map_cloud, a reset tile_delta) is a block switch (block_map mode) or a reset
+    // of the map source (a respawned provider, a resend): the window keeps N_r states.
+    const int replacements = map_replacements_;
+    if (out.map_swapped && replacements != map_replacements_seen_) {
+      if (map_replacements_seen_ > 0) localizer_->fusion().mapSwitched();
+      map_replacements_seen_ = replacements;
     }
     logFusionWarnings();
     if (out.reset) NODELET_WARN("scan time went backwards (bag loop?): localizer reset");
@@ -313,6 +317,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     status_header.frame_id = params_.map_frame;
     NdtStatus status = toStatusMsg(out, status_header, localizer_->map().stats().update_ms, params_.map_source);
     status.scans_dropped = scan_slot_.dropped();
+    status.window_states = static_cast<std::uint32_t>(localizer_->fusion().states());
     if (status.scans_dropped > warned_drops_) {
       NODELET_WARN_THROTTLE(5.0, "%lu scans dropped so far: scans arrive faster than they are matched",
                             static_cast<unsigned long>(status.scans_dropped));
@@ -338,8 +343,8 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   std::map<std::string, Eigen::Isometry3d> static_cache_;  // scan thread only
   std::unique_ptr<TileDeltaInput> tile_input_;             // tiles mode; tile_delta callback only (never concurrent)
   std::optional<LocalizerState> last_state_;               // for logging each state change once
-  std::atomic<int> map_clouds_{0};                         // map_cloud messages taken (multi-threaded queue)
-  int map_clouds_seen_ = 0;                                // scan thread: map_clouds_ at the last map swap
+  std::atomic<int> map_replacements_{0};                   // whole maps taken (multi-threaded queue)
+  int map_replacements_seen_ = 0;                          // scan thread: map_replacements_ at the last map swap
   WarningThrottle fusion_warnings_{5.0};                   // scan thread
   GlobalSearchTimer global_search_timer_{0.0};             // scan thread; set from the parameters in onInit
   std::optional<Eigen::Vector2d> hint_;                    // last initialpose_hint (map frame)

@@ -8,7 +8,6 @@ replays the bag with `rosbag play --clock` and compares the trajectories."""
 
 from __future__ import annotations
 
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -17,73 +16,11 @@ import rostest
 from fixtures import localizer_replay as replay
 from fixtures import synthetic_scene as ss
 from fixtures.odometry_track import OdometryTrack
-from fixtures.synthetic_tiles import write_map_tiles
+from fixtures.tile_delta_publisher import TileDeltaPublisher
 from geometry_msgs.msg import PoseStamped
-from grid_puzzle_localization.msg import NdtStatus, TileDelta
-from std_msgs.msg import Header
-from std_srvs.srv import Trigger, TriggerResponse
+from grid_puzzle_localization.msg import NdtStatus
 
-from grid_puzzle_localization.tiles import grid
-
-TILE = 10.0  # tile side [m]
-WINDOW = 7  # tiles on each side of the vehicle's tile
 OFFSET = ss.pose_matrix(np.array([0.8, 0.6, 0.0]), np.deg2rad(5.0))  # 1 m, 5 deg
-
-
-class TileDeltaPublisher:
-    """A minimal tile provider: tile files in ``tile_dir``, a square window around the ground-truth position,
-    incremental deltas by reference, a reset on `resend`. Skips one revision on purpose (the second window
-    change)."""
-
-    def __init__(self, points: np.ndarray, tile_dir: Path) -> None:
-        self.tiles = write_map_tiles(points, tile_dir, TILE)
-        self.tile_dir = tile_dir
-        self.loaded: set[tuple[int, int]] = set()
-        self.revision = 0
-        self.changes = 0
-        self.resend_calls = 0
-        self.lock = threading.Lock()
-        self.pub = rospy.Publisher("/tile_delta", TileDelta, queue_size=100)
-        self.srv = rospy.Service("/tile_provider/resend", Trigger, self._resend)
-
-    def _msg(self, reset: bool, added: list, removed: list) -> TileDelta:
-        self.revision += 1
-        header = Header(stamp=rospy.Time.now(), frame_id="map")
-        return TileDelta(
-            header=header,
-            revision=self.revision,
-            reset=reset,
-            grid_size=TILE,
-            tile_dir=str(self.tile_dir),
-            index_revision="1",
-            added_ids=[grid.tile_stem(i, j, TILE) for i, j in added],
-            removed_ids=[grid.tile_stem(i, j, TILE) for i, j in removed],
-        )
-
-    def _resend(self, _req: object) -> TriggerResponse:
-        with self.lock:
-            self.resend_calls += 1
-            self.pub.publish(self._msg(True, sorted(self.loaded), []))
-        return TriggerResponse(success=True, message="window resent")
-
-    def follow(self, x: float, y: float) -> None:
-        ci, cj = int(np.floor(x / TILE)), int(np.floor(y / TILE))
-        want = {
-            (i, j)
-            for i in range(ci - WINDOW, ci + WINDOW + 1)
-            for j in range(cj - WINDOW, cj + WINDOW + 1)
-            if (i, j) in self.tiles
-        }
-        with self.lock:
-            if want == self.loaded:
-                return
-            reset = not self.loaded
-            msg = self._msg(reset, sorted(want - self.loaded), sorted(self.loaded - want))
-            self.loaded = want
-            self.changes += 1
-            if self.changes == 2:
-                return  # lost on purpose: the localizer must notice the gap and ask for a resend
-            self.pub.publish(msg)
 
 
 class NdtLocalizerTest(replay.DriveReplayTest):
