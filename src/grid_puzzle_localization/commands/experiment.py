@@ -39,6 +39,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--block-size", type=float, default=ExperimentConfig.block_size_m, help="block size S [m] of built block maps"
     )
     parser.add_argument(
+        "--submaps",
+        help="fixed-size submap directory of the storage comparison (block_map mode): reused if it holds the map's "
+        "submaps of side S, else cut (default OUT/submaps_L<S>)",
+    )
+    parser.add_argument(
         "--modes", nargs="+", default=list(DEFAULT_MODES), choices=MODES, help="modes to run (default: %(default)s)"
     )
     parser.add_argument(
@@ -131,7 +136,8 @@ def run(args: argparse.Namespace) -> int:
     if "block_map" in cfg.modes:
         size = cfg.block_size_m
         blocks = cfg.blocks or ensure_blocks(cfg.global_map, cfg.ground_truth, cfg.out_dir / f"blocks_S{size:g}", size)
-        submaps = ensure_submaps(cfg.global_map, cfg.out_dir / f"submaps_L{size:g}", size)
+        submap_dir = Path(args.submaps) if args.submaps else cfg.out_dir / f"submaps_L{size:g}"
+        submaps = ensure_submaps(cfg.global_map, submap_dir, size)
         cfg = dataclasses.replace(cfg, blocks=blocks)
     summary = run_experiment(cfg, tiles, storage_figures(cfg.global_map, tiles, blocks, submaps))
     print("\n".join(comparison_table(summary)))
