@@ -109,6 +109,7 @@ def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
         ground_truth=Path(gt) if gt else None,
         tiles=Path(args.tiles) if args.tiles else None,
         blocks=Path(args.blocks) if args.blocks else None,
+        submaps=Path(args.submaps) if args.submaps else None,
         block_size_m=args.block_size,
         modes=list(dict.fromkeys(args.modes)),
         preset=args.preset,
@@ -136,8 +137,7 @@ def run(args: argparse.Namespace) -> int:
     if "block_map" in cfg.modes:
         size = cfg.block_size_m
         blocks = cfg.blocks or ensure_blocks(cfg.global_map, cfg.ground_truth, cfg.out_dir / f"blocks_S{size:g}", size)
-        submap_dir = Path(args.submaps) if args.submaps else cfg.out_dir / f"submaps_L{size:g}"
-        submaps = ensure_submaps(cfg.global_map, submap_dir, size)
+        submaps = ensure_submaps(cfg.global_map, cfg.submaps or cfg.out_dir / f"submaps_L{size:g}", size)
         cfg = dataclasses.replace(cfg, blocks=blocks)
     summary = run_experiment(cfg, tiles, storage_figures(cfg.global_map, tiles, blocks, submaps))
     print("\n".join(comparison_table(summary)))

@@ -54,6 +54,7 @@ class ExperimentConfig:
     tiles: Path | None = None  # None: cut from global_map into out_dir/tiles
     blocks: Path | None = None  # block map directory from `gpm blocks`; None: built from global_map along ground_truth
     block_size_m: float = BlockConfig.block_size  # S of the blocks built when blocks is None
+    submaps: Path | None = None  # fixed-size submaps of side S for the storage table; None: cut into out_dir
     modes: list[str] = field(default_factory=lambda: list(DEFAULT_MODES))
     preset: str = "demo"
     window: WindowPreset = PRESETS["demo"]
