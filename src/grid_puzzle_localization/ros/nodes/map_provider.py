@@ -2,8 +2,8 @@
 
 Subscribes to ``odom`` (nav_msgs/Odometry; then also to ``initialpose``, which seeds the first window
 before the localizer has a map) or ``pose`` (PoseWithCovarianceStamped), all in the map frame.
-Callbacks only store the latest pose; a worker thread recomputes the window (provider/window.py), finds the
-tiles that enter and leave it and those likely to enter next (provider/tile_references.py) and publishes them
+Callbacks only store the latest pose; a worker thread hands it to the window server (provider/window_server.py),
+which recomputes the window, finds the tiles that enter and leave it and those likely to enter next, and publishes them
 by reference on ``tile_delta`` (TileDelta: tile names and their directory; the localizer reads the files) and
 the latched ``~status``. The node holds no point data. When ``publish_map_cloud`` is set it also tells the
 map_cloud publisher (map_cloud_publisher.py, a thread of its own) that the window changed; that thread reads
@@ -34,9 +34,10 @@ from std_srvs.srv import Trigger, TriggerResponse
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.msg import NdtStatus, ProviderStatus, TileDelta
 from grid_puzzle_localization.provider.config import ProviderConfig, load_config
-from grid_puzzle_localization.provider.lost_search import LostSearchWindow, SearchRegion
+from grid_puzzle_localization.provider.lost_search import SearchRegion
 from grid_puzzle_localization.provider.tile_references import TileReferences
 from grid_puzzle_localization.provider.window import PoseSample, Window, WindowTracker
+from grid_puzzle_localization.provider.window_server import Served, WindowServer
 from grid_puzzle_localization.ros.msgs.provider import pose_sample, provider_status, stamped, tile_delta
 from grid_puzzle_localization.tiles.directory import open_tile_directory
 from grid_puzzle_localization.util.malloc_tuning import limit_arenas, pin_mmap_threshold
@@ -67,19 +68,18 @@ class MapProviderNode:
                 self.s,
                 ", ".join(directory.unparsable[:10]),
             )
-        self.tracker = WindowTracker(self.config.window, self.s)
-        self.tiles = TileReferences(directory)
+        self.server = WindowServer(
+            WindowTracker(self.config.window, self.s), TileReferences(directory), self.config.lost.max_half_side
+        )
         self.frame = self.config.map_frame
         # Serialises tile set updates and every publish on tile_delta, so a reset sent to a new subscriber
         # (from rospy's connection thread) or by ~resend is consistent with the delta stream.
         self._lock = threading.Lock()
         self._revision = 0
-        self._window: Window | None = None
         self._off_map = False
         self._latest: PoseSample | None = None
         self._search: SearchRegion | None = None  # the lost localizer's latest search region
         self._tracking_again = False  # the localizer tracks again after a loss
-        self._lost = LostSearchWindow(self.config.lost.max_half_side, self.tracker.config.n * self.s, self.s)
         self._pose_ready = threading.Condition()
 
         self.delta_pub = rospy.Publisher(
@@ -111,9 +111,9 @@ class MapProviderNode:
             self.s,
             tiles.dir,
             directory.source,
-            self.tracker.config.n,
-            self.tracker.config.k,
-            self.tracker.update_distance,
+            self.server.tracker.config.n,
+            self.server.tracker.config.k,
+            self.server.tracker.update_distance,
             self.config.pose_source,
         )
 
@@ -172,27 +172,30 @@ class MapProviderNode:
                     self._pose_ready.wait(0.5)
                 pose, self._latest = self._latest, None
                 search, self._search = self._search, None
-                if self._tracking_again and self._lost.end():
-                    self.tracker.restart()  # the next pose is measured again: the window goes back to it
-                self._tracking_again = False
+                tracking_again, self._tracking_again = self._tracking_again, False
+            if tracking_again:
+                with self._lock:
+                    self.server.end_search()  # the next pose is measured again: the window goes back to it
             self._follow_directory()
             if search is not None:
                 self._cover_search(search)
-            if pose is None or self._lost.active:
-                continue  # while the localizer is lost its pose is a prediction: the search's window stays
-            start = time.perf_counter()
-            window = self.tracker.update(pose)
-            if window is not None:
-                self._serve(pose, window, start)
+            if pose is not None:
+                start = time.perf_counter()
+                with self._lock:
+                    served = self.server.on_pose(pose)
+                if served is not None:
+                    self._publish(served, start)
 
     def _cover_search(self, region: SearchRegion) -> None:
         """Serves the window that holds the lost localizer's search region (provider/lost_search.py)."""
         start = time.perf_counter()
-        first = not self._lost.active
-        window = self._lost.cover(region, self.tracker.window, self._window)
-        if window is None:
+        with self._lock:
+            first = not self.server.lost.active
+            served = self.server.on_search(region)
+        if served is None:
             return
         if first:
+            window = served.window
             rospy.logwarn(
                 "the localizer is lost: the window grows to %.0f m x %.0f m around (%.1f, %.1f) m for its search",
                 (window.i_max - window.i_min + 1) * self.s,
@@ -200,55 +203,52 @@ class MapProviderNode:
                 region.x,
                 region.y,
             )
-        self._serve(PoseSample(region.x, region.y, region.t), window, start)
+        self._publish(served, start)
 
     def _follow_directory(self) -> None:
         """Sends the whole window again when the tile directory was rewritten (new index revision)."""
         try:
             with self._lock:
-                changed = self.tiles.refresh()
+                changed = self.server.refresh()
         except (UserError, OSError) as err:
             rospy.logerr_throttle(WARN_PERIOD, "tile directory unusable, keeping the window as it is: %s", err)
             return
         if changed:
             rospy.logwarn(
                 "tile directory %s changed (index revision %s): sending the whole window again",
-                self.tiles.directory.path,
-                self.tiles.revision,
+                self.server.tiles.directory.path,
+                self.server.tiles.revision,
             )
             self.send_reset(self.delta_pub.publish, increment=True)
             if self.map_cloud is not None:
                 self.map_cloud.changed(rospy.Time.now())
 
-    def _serve(self, pose: PoseSample, window: Window, start: float) -> None:
-        """Publishes the change of the window; ``start``: perf_counter() when the update began."""
+    def _publish(self, served: Served, start: float) -> None:
+        """Publishes a window update; ``start``: perf_counter() when the update began."""
+        pose, window, delta = served.pose, served.window, served.delta
         stamp = rospy.Time.from_sec(pose.t) if pose.t > 0.0 else rospy.Time.now()
         with self._lock:
-            delta = self.tiles.update(window, self.tracker.predicted_windows())
-            first = self._window is None
-            changed = first or delta.added or delta.removed or window.bounds != self._window.bounds
-            self._window = window
-            msg = self._delta_msg(stamp, first, delta.added, delta.removed, delta.prefetch)
-            if changed:
+            msg = self._delta_msg(stamp, window, served.first, delta.added, delta.removed, delta.prefetch)
+            if served.changed:
                 self._revision += 1
                 msg.revision = self._revision
                 self.delta_pub.publish(msg)
-            loaded = len(self.tiles.loaded())
+            loaded = len(self.server.tiles.loaded())
         self._report(pose, window, loaded)
-        if self.map_cloud is not None and (first or delta.added or delta.removed):
+        if self.map_cloud is not None and (served.first or delta.added or delta.removed):
             self.map_cloud.changed(stamp)
         update_ms = (time.perf_counter() - start) * 1e3
         self.status_pub.publish(provider_status(stamped(self.frame, stamp), window, msg, loaded, update_ms))
 
-    def _delta_msg(self, stamp, reset: bool, added, removed, prefetch):
+    def _delta_msg(self, stamp, window: Window, reset: bool, added, removed, prefetch):
         return tile_delta(
             stamped(self.frame, stamp),
             self._revision,
             reset,
             self.s,
-            self._window,
-            str(self.tiles.directory.path),
-            self.tiles.revision,
+            window,
+            str(self.server.tiles.directory.path),
+            self.server.tiles.revision,
             added,
             removed,
             prefetch,
@@ -256,12 +256,12 @@ class MapProviderNode:
 
     def _window_paths(self) -> list:
         with self._lock:
-            return self.tiles.paths()
+            return self.server.tiles.paths()
 
     def _report(self, pose: PoseSample, window: Window, loaded: int) -> None:
         off_map = loaded == 0
         if off_map:
-            i0, i1, j0, j1 = self.tiles.directory.bounds
+            i0, i1, j0, j1 = self.server.tiles.directory.bounds
             rospy.logwarn_throttle(
                 WARN_PERIOD,
                 "pose (%.1f, %.1f) m is off the map: no tile in window i %d..%d, j %d..%d (the map spans"
@@ -283,13 +283,13 @@ class MapProviderNode:
         None before the first window. ``increment``: a broadcast delta (new revision) rather than a
         catch-up for one new subscriber (current revision)."""
         with self._lock:
-            if self._window is None:
+            whole = self.server.whole()
+            if whole is None:
                 return None
             if increment:
                 self._revision += 1
-            # Changes nothing, except after a refresh, which emptied the set: then it loads the new directory's.
-            prefetch = self.tiles.update(self._window, self.tracker.predicted_windows()).prefetch
-            publish(self._delta_msg(rospy.Time.now(), True, self.tiles.loaded(), [], prefetch))
+            window, delta = whole
+            publish(self._delta_msg(rospy.Time.now(), window, True, delta.added, [], delta.prefetch))
             return self._revision
 
 

@@ -1,0 +1,54 @@
+// What the provider serves: the window that follows the pose, or while the localizer is lost the window that holds
+// its search, and that window's tiles by reference. The C++ twin of provider/window_server.py (the rospy provider's),
+// held equal to it by test_window_server_equality. No ROS; not thread-safe (the nodelet serialises its calls).
+#pragma once
+
+#include <optional>
+#include <utility>
+
+#include "grid_puzzle_localization/provider/tile_references.hpp"
+#include "grid_puzzle_localization/provider/window.hpp"
+
+namespace grid_puzzle_localization {
+
+/// One window update: the window, its tile change, and where it was computed.
+struct Served {
+  Window window;
+  ReferenceDelta delta;
+  bool first = false;    ///< the first window: sent as a reset
+  bool changed = false;  ///< the tile set or the bounds changed: a new delta revision is due
+  PoseSample pose;       ///< the pose, or the search region's centre, the window was computed for
+};
+
+class WindowServer {
+ public:
+  WindowServer(const WindowConfig& window, double max_half_side, TileDirectory directory);
+
+  /// The localizer tracks again: the next pose recomputes the window wherever it is.
+  void endSearch() {
+    if (lost_.end()) tracker_.restart();
+  }
+  /// The window holding the lost localizer's search region, or nullopt when it is served already.
+  std::optional<Served> onSearch(const SearchRegion& region);
+  /// The window after `pose`, or nullopt when it stays (not moved far enough, or a search's window is served).
+  std::optional<Served> onPose(const PoseSample& pose);
+  /// True when the tile directory was rewritten (a new index revision): the whole window is due as a reset. Throws
+  /// std::invalid_argument when the directory became unusable.
+  bool refresh() { return tiles_.refresh(); }
+  /// The served window with all its tiles as `added` (a reset), or nullopt before the first window.
+  std::optional<std::pair<Window, ReferenceDelta>> whole();
+
+  bool searching() const { return lost_.active(); }
+  const WindowTracker& tracker() const { return tracker_; }
+  const TileReferences& tiles() const { return tiles_; }
+
+ private:
+  Served serve(const PoseSample& pose, const Window& window);
+
+  WindowTracker tracker_;
+  TileReferences tiles_;
+  LostSearchWindow lost_;
+  std::optional<Window> window_;  // the window served last
+};
+
+}  // namespace grid_puzzle_localization

@@ -1,0 +1,287 @@
+#include "grid_puzzle_localization/provider/tile_directory.hpp"
+
+#include <dirent.h>
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+
+namespace grid_puzzle_localization {
+namespace {
+
+constexpr std::int64_t kOffset = std::int64_t{1} << 31;  // codes hold i + 2^31 and j + 2^31
+constexpr std::uint64_t kLow = (std::uint64_t{1} << 32) - 1;
+constexpr const char* kIndexFile = "index.json";
+constexpr const char* kIndexFormat = "grid_puzzle_tiles";
+constexpr std::uint64_t kIndexVersion = 1;
+
+std::string formatFixed(long double value, int digits) {
+  const int size = std::snprintf(nullptr, 0, "%.*Lf", digits, value);
+  std::string text(static_cast<std::size_t>(size) + 1, '\0');
+  std::snprintf(&text[0], text.size(), "%.*Lf", digits, value);
+  text.resize(static_cast<std::size_t>(size));
+  return text;
+}
+
+// "-?d+.d+": the number form of a tile name.
+bool isTileNumber(const std::string& s, std::size_t begin, std::size_t end) {
+  if (begin < end && s[begin] == '-') ++begin;
+  const std::size_t dot = s.find('.', begin);
+  if (dot == std::string::npos || dot >= end || dot == begin || dot + 1 == end) return false;
+  for (std::size_t c = begin; c < end; ++c)
+    if (c != dot && !std::isdigit(static_cast<unsigned char>(s[c]))) return false;
+  return true;
+}
+
+bool isDirectory(const std::string& path) {
+  struct stat st {};
+  return ::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode);
+}
+
+bool isFile(const std::string& path) {
+  struct stat st {};
+  return ::stat(path.c_str(), &st) == 0 && S_ISREG(st.st_mode);
+}
+
+double checkedGridSize(double s, const std::string& path) {
+  if (!(std::isfinite(s) && s > 0.0))
+    throw std::invalid_argument("tile directory " + path + ": grid size must be a positive number of metres (got " +
+                                std::to_string(s) + "); set tiles/grid_size, e.g. 2");
+  return s;
+}
+
+// Streaming reader of index.json (schema: src/grid_puzzle_localization/tiling/index.py): the header members of the
+// top-level object and the "key" of every entry of its "tiles" array; nothing else is kept.
+class IndexReader {
+ public:
+  using json = nlohmann::json;
+  std::vector<std::uint64_t> codes;
+  std::string format;
+  std::uint64_t version = 0;
+  double grid_size = std::nan("");
+  std::string error;
+
+  bool null() { return value(); }
+  bool boolean(bool) { return value(); }
+  bool number_integer(json::number_integer_t v) { return number(static_cast<long double>(v), true); }
+  bool number_unsigned(json::number_unsigned_t v) { return number(static_cast<long double>(v), true); }
+  bool number_float(json::number_float_t v, const json::string_t&) { return number(v, false); }
+  bool string(json::string_t& v) {
+    if (stack_.size() == 1 && key_ == "format") format = v;
+    return value();
+  }
+  template <class Binary>
+  bool binary(Binary&) {
+    return value();
+  }
+  bool start_object(std::size_t) { return open('{'); }
+  bool end_object() { return close(); }
+  bool start_array(std::size_t) {
+    if (inKey()) key_values_ = 0;
+    return open('[');
+  }
+  bool end_array() {
+    if (stack_.size() == 4 && in_key_array_) {
+      in_key_array_ = false;
+      if (key_values_ != 2) return fail("a tile key is not [i, j]");
+      try {
+        codes.push_back(encodeTileKey(key_i_, key_j_));
+      } catch (const std::out_of_range& e) {
+        return fail(e.what());
+      }
+    }
+    return close();
+  }
+  bool key(json::string_t& k) {
+    key_ = k;
+    if (stack_.size() == 3 && in_tiles_) in_key_array_ = k == "key";
+    return true;
+  }
+  template <class Exception>
+  bool parse_error(std::size_t position, const std::string&, const Exception& e) {
+    return fail("byte " + std::to_string(position) + ": " + e.what());
+  }
+
+ private:
+  bool inKey() const { return stack_.size() == 3 && in_tiles_ && in_key_array_; }
+  bool open(char kind) {
+    if (stack_.size() == 1 && kind == '[') in_tiles_ = key_ == "tiles";
+    stack_.push_back(kind);
+    return true;
+  }
+  bool close() {
+    stack_.pop_back();
+    if (stack_.size() == 1) in_tiles_ = false;
+    return true;
+  }
+  bool value() { return true; }
+  bool number(long double v, bool integral) {
+    if (stack_.size() == 1 && key_ == "version" && integral) version = static_cast<std::uint64_t>(v);
+    if (stack_.size() == 1 && key_ == "grid_size") grid_size = static_cast<double>(v);
+    if (stack_.size() == 4 && in_key_array_) {
+      if (!integral) return fail("a tile key holds a non-integer");
+      (key_values_ == 0 ? key_i_ : key_j_) = static_cast<std::int64_t>(v);
+      ++key_values_;
+    }
+    return true;
+  }
+  bool fail(const std::string& what) {
+    error = what;
+    return false;
+  }
+
+  std::vector<char> stack_;
+  std::string key_;
+  bool in_tiles_ = false, in_key_array_ = false;
+  int key_values_ = 0;
+  std::int64_t key_i_ = 0, key_j_ = 0;
+};
+
+double readIndexKeys(const std::string& index_path, std::vector<std::uint64_t>& codes) {
+  std::ifstream in(index_path, std::ios::binary);
+  IndexReader reader;
+  std::string problem;
+  if (!in) {
+    problem = "cannot be opened";
+  } else if (!nlohmann::json::sax_parse(in, &reader)) {
+    problem = reader.error.empty() ? "not JSON" : reader.error;
+  } else if (reader.format != kIndexFormat || reader.version != kIndexVersion) {
+    problem = "not a version " + std::to_string(kIndexVersion) + " " + kIndexFormat + " index";
+  } else if (!(std::isfinite(reader.grid_size) && reader.grid_size > 0.0)) {
+    problem = "no positive grid_size";
+  }
+  if (!problem.empty())
+    throw std::invalid_argument(index_path + ": not a readable tile index (" + problem + "); re-run `gpm tile`");
+  codes = std::move(reader.codes);
+  std::sort(codes.begin(), codes.end());
+  return reader.grid_size;
+}
+
+void scanTiles(TileDirectory& dir) {
+  DIR* d = ::opendir(dir.path.c_str());
+  if (d == nullptr)
+    throw std::invalid_argument("tile directory " + dir.path + " cannot be read; check its permissions");
+  while (const dirent* entry = ::readdir(d)) {
+    const std::string name = entry->d_name;
+    if (name.size() < 4 || name.compare(name.size() - 4, 4, ".pcd") != 0) continue;
+    TileKey key;
+    if (parseTileStem(name.substr(0, name.size() - 4), dir.grid_size, key))
+      dir.codes.push_back(encodeTileKey(key.i, key.j));
+    else
+      dir.unparsable.push_back(name);
+  }
+  ::closedir(d);
+  std::sort(dir.codes.begin(), dir.codes.end());
+  std::sort(dir.unparsable.begin(), dir.unparsable.end());
+}
+
+}  // namespace
+
+std::uint64_t encodeTileKey(std::int64_t i, std::int64_t j) {
+  if (i < -kOffset || i >= kOffset || j < -kOffset || j >= kOffset)
+    throw std::out_of_range("tile index (" + std::to_string(i) + ", " + std::to_string(j) + ") is beyond +-2^31");
+  return (static_cast<std::uint64_t>(i + kOffset) << 32) | static_cast<std::uint64_t>(j + kOffset);
+}
+
+TileKey decodeTileKey(std::uint64_t code) {
+  return {static_cast<std::int64_t>(code >> 32) - kOffset, static_cast<std::int64_t>(code & kLow) - kOffset};
+}
+
+std::string formatTileCentre(std::int64_t i, double s) {
+  const long double exact = (static_cast<long double>(i) + 0.5L) * static_cast<long double>(s);
+  const long double tolerance = static_cast<long double>(s) * 1e-9L;
+  const double nearest = static_cast<double>(exact);
+  for (int digits = 1; digits < 18; ++digits) {
+    const std::string text = formatFixed(nearest, digits);
+    if (std::fabs(std::strtold(text.c_str(), nullptr) - exact) <= tolerance) return text;
+  }
+  return formatFixed(nearest, 17);
+}
+
+std::string tileStem(std::int64_t i, std::int64_t j, double s) {
+  return formatTileCentre(i, s) + "_" + formatTileCentre(j, s);
+}
+
+bool parseTileStem(const std::string& stem, double s, TileKey& key) {
+  const std::size_t sep = stem.find('_');
+  if (sep == std::string::npos || !isTileNumber(stem, 0, sep) || !isTileNumber(stem, sep + 1, stem.size()))
+    return false;
+  const TileKey k{tileIndex(std::strtod(stem.c_str(), nullptr), s),
+                  tileIndex(std::strtod(stem.c_str() + sep + 1, nullptr), s)};
+  if (tileStem(k.i, k.j, s) != stem) return false;
+  key = k;
+  return true;
+}
+
+std::string tileIndexRevision(const std::string& dir) {
+  struct stat st {};
+  if (::stat((dir + "/" + kIndexFile).c_str(), &st) == 0)
+    return "index:" + std::to_string(st.st_ino) + ":" +
+           std::to_string(static_cast<long long>(st.st_mtim.tv_sec) * 1000000000LL + st.st_mtim.tv_nsec) + ":" +
+           std::to_string(st.st_size);
+  if (::stat(dir.c_str(), &st) != 0) throw std::invalid_argument("tile directory " + dir + " cannot be read any more");
+  return "scan:" + std::to_string(st.st_ino) + ":" +
+         std::to_string(static_cast<long long>(st.st_mtim.tv_sec) * 1000000000LL + st.st_mtim.tv_nsec);
+}
+
+void TileDirectory::codesInBox(const TileBox& box, std::vector<std::uint64_t>& out) const {
+  const std::int64_t i_min = std::max(box.i_min, bounds.i_min), i_max = std::min(box.i_max, bounds.i_max);
+  const std::int64_t j_lo = std::max(box.j_min, -kOffset), j_hi = std::min(box.j_max, kOffset - 1);
+  if (j_lo > j_hi) return;
+  for (std::int64_t i = i_min; i <= i_max; ++i) {
+    const auto lo = std::lower_bound(codes.begin(), codes.end(), encodeTileKey(i, j_lo));
+    const auto hi = std::upper_bound(lo, codes.end(), encodeTileKey(i, j_hi));
+    out.insert(out.end(), lo, hi);
+  }
+}
+
+TileDirectory openTileDirectory(const std::string& path, double grid_size) {
+  if (!isDirectory(path))
+    throw std::invalid_argument("tile directory " + path +
+                                " does not exist; write one with `gpm tile` or fix the path");
+  TileDirectory dir;
+  dir.path = path;
+  const std::string index = path + "/" + kIndexFile;
+  if (isFile(index)) {
+    const double s = readIndexKeys(index, dir.codes);
+    if (grid_size > 0.0 && std::fabs(grid_size - s) > 1e-9 * s)
+      throw std::invalid_argument("grid size " + std::to_string(grid_size) + " m disagrees with " + index +
+                                  ", which says " + std::to_string(s) +
+                                  " m; leave the grid size unset (0) to use the index's");
+    if (dir.codes.empty())
+      throw std::invalid_argument("tile directory " + path +
+                                  ": its index lists no tiles; re-run `gpm tile` on a non-empty map");
+    dir.grid_size = s;
+    dir.source = "index";
+  } else {
+    if (!(grid_size > 0.0))
+      throw std::invalid_argument("tile directory " + path +
+                                  " has no index file, so the grid size is unknown; pass it (tiles/grid_size)");
+    dir.grid_size = checkedGridSize(grid_size, path);
+    dir.source = "scan";
+    scanTiles(dir);
+    if (dir.codes.empty())
+      throw std::invalid_argument(
+          "tile directory " + path +
+          " holds no tile files named <cx>_<cy>.pcd for s = " + std::to_string(dir.grid_size) + " m" +
+          (dir.unparsable.empty() ? std::string()
+                                  : " (" + std::to_string(dir.unparsable.size()) +
+                                        " .pcd files with other names, e.g. " + dir.unparsable.front() + ")"));
+  }
+  const TileKey first = decodeTileKey(dir.codes.front()), last = decodeTileKey(dir.codes.back());
+  dir.bounds = {first.i, last.i, kOffset, -kOffset};
+  for (const std::uint64_t c : dir.codes) {
+    const std::int64_t j = decodeTileKey(c).j;
+    dir.bounds.j_min = std::min(dir.bounds.j_min, j);
+    dir.bounds.j_max = std::max(dir.bounds.j_max, j);
+  }
+  return dir;
+}
+
+}  // namespace grid_puzzle_localization

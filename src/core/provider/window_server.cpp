@@ -1,0 +1,48 @@
+#include "grid_puzzle_localization/provider/window_server.hpp"
+
+namespace grid_puzzle_localization {
+
+WindowServer::WindowServer(const WindowConfig& window, double max_half_side, TileDirectory directory)
+    : tracker_(window, directory.grid_size),
+      tiles_(std::move(directory)),
+      lost_(max_half_side, tracker_.config().n * tiles_.directory().grid_size, tiles_.directory().grid_size) {}
+
+std::optional<Served> WindowServer::onSearch(const SearchRegion& region) {
+  const std::optional<TileBox> served = window_ ? std::optional<TileBox>(window_->bounds()) : std::nullopt;
+  const std::optional<Window> window = lost_.cover(region, tracker_.window(), served);
+  if (!window) return std::nullopt;
+  PoseSample centre;
+  centre.x = region.x;
+  centre.y = region.y;
+  centre.t = region.t;
+  return serve(centre, *window);
+}
+
+std::optional<Served> WindowServer::onPose(const PoseSample& pose) {
+  if (lost_.active()) return std::nullopt;  // while the localizer is lost its pose is a prediction
+  const std::optional<Window> window = tracker_.update(pose);
+  if (!window) return std::nullopt;
+  return serve(pose, *window);
+}
+
+std::optional<std::pair<Window, ReferenceDelta>> WindowServer::whole() {
+  if (!window_) return std::nullopt;
+  // Changes nothing, except after a refresh, which emptied the set: then it loads the new directory's.
+  ReferenceDelta delta;
+  delta.prefetch = tiles_.update(window_->bounds(), tracker_.predictedWindows()).prefetch;
+  delta.added = tiles_.loaded();
+  return std::make_pair(*window_, std::move(delta));
+}
+
+Served WindowServer::serve(const PoseSample& pose, const Window& window) {
+  Served s;
+  s.delta = tiles_.update(window.bounds(), tracker_.predictedWindows());
+  s.first = !window_;
+  s.changed = s.first || !s.delta.added.empty() || !s.delta.removed.empty() || window.bounds() != window_->bounds();
+  s.window = window;
+  s.pose = pose;
+  window_ = window;
+  return s;
+}
+
+}  // namespace grid_puzzle_localization

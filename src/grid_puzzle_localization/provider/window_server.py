@@ -1,0 +1,71 @@
+"""What the provider serves: the window that follows the pose, or while the localizer is lost the window that holds
+its search, and that window's tiles by reference. The provider node feeds it poses, search regions and the end of a
+search, and publishes what it returns; the provider nodelet's WindowServer (provider/window_server.hpp) is its C++
+twin, held equal to it by test_window_server_equality.
+
+Pure Python (no ROS); not thread-safe (the node serialises its calls).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from grid_puzzle_localization.provider.lost_search import LostSearchWindow, SearchRegion
+from grid_puzzle_localization.provider.tile_references import ReferenceDelta, TileReferences
+from grid_puzzle_localization.provider.window import PoseSample, Window, WindowTracker
+
+
+@dataclass(frozen=True)
+class Served:
+    """One window update: the window, its tile change, and where it was computed."""
+
+    window: Window
+    delta: ReferenceDelta
+    first: bool  # the first window since the start or a refresh of the directory: sent as a reset
+    changed: bool  # the tile set or the bounds changed: a new delta revision is due
+    pose: PoseSample  # the pose, or the search region's centre, the window was computed for
+
+
+class WindowServer:
+    def __init__(self, tracker: WindowTracker, tiles: TileReferences, max_half_side: float) -> None:
+        self.tracker = tracker
+        self.tiles = tiles
+        self.lost = LostSearchWindow(max_half_side, tracker.config.n * tracker.s, tracker.s)
+        self.window: Window | None = None  # the window served last
+
+    def end_search(self) -> None:
+        """The localizer tracks again: the next pose recomputes the window wherever it is."""
+        if self.lost.end():
+            self.tracker.restart()
+
+    def on_search(self, region: SearchRegion) -> Served | None:
+        """The window holding the lost localizer's search region, or None when it is served already."""
+        window = self.lost.cover(region, self.tracker.window, self.window)
+        return None if window is None else self._serve(PoseSample(region.x, region.y, region.t), window)
+
+    def on_pose(self, pose: PoseSample) -> Served | None:
+        """The window after ``pose``, or None when it stays (not moved far enough, or a search's window is served:
+        while the localizer is lost its pose is a prediction)."""
+        if self.lost.active:
+            return None
+        window = self.tracker.update(pose)
+        return None if window is None else self._serve(pose, window)
+
+    def refresh(self) -> bool:
+        """True when the tile directory was rewritten (a new index revision): the whole window is due as a reset."""
+        return self.tiles.refresh()
+
+    def whole(self) -> tuple[Window, ReferenceDelta] | None:
+        """The served window with all its tiles as ``added`` (a reset), or None before the first window."""
+        if self.window is None:
+            return None
+        # Changes nothing, except after a refresh, which emptied the set: then it loads the new directory's.
+        prefetch = self.tiles.update(self.window, self.tracker.predicted_windows()).prefetch
+        return self.window, ReferenceDelta(self.tiles.loaded(), [], prefetch)
+
+    def _serve(self, pose: PoseSample, window: Window) -> Served:
+        delta = self.tiles.update(window, self.tracker.predicted_windows())
+        first = self.window is None
+        changed = first or bool(delta.added or delta.removed) or window.bounds != self.window.bounds
+        self.window = window
+        return Served(window, delta, first, changed, pose)

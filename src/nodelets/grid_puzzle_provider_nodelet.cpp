@@ -1,0 +1,336 @@
+// Grid puzzle provider nodelet: the rospy grid_puzzle_map_provider's parameters, topics and TileDelta protocol in
+// the localizer's nodelet manager, so the provider costs no process of its own and its deltas reach the localizer
+// as shared pointers. The window maths and tile sets live in the core (provider/window_server.hpp, the twin of the
+// rospy node's provider/window_server.py); this file wires them to ROS.
+//
+// Callbacks only store the newest pose, search region or end of a search; a worker thread feeds them to the window
+// server and publishes each change of the window by reference on `tile_delta` (the localizer reads the files) and
+// the latched `~status`. A new subscriber first receives a reset delta of the whole window at the current revision;
+// `~resend` (std_srvs/Trigger) broadcasts one. A tile directory rewritten under the running nodelet (a new index
+// revision) is reopened and the whole window sent again as a reset; one that cannot be opened is retried.
+#include <geometry_msgs/PoseWithCovarianceStamped.h>
+#include <nav_msgs/Odometry.h>
+#include <nodelet/nodelet.h>
+#include <ros/ros.h>
+#include <std_srvs/Trigger.h>
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <filesystem>
+#include <mutex>
+#include <optional>
+#include <pluginlib/class_list_macros.hpp>
+#include <thread>
+
+#include "grid_puzzle_localization/NdtStatus.h"
+#include "grid_puzzle_localization/ProviderStatus.h"
+#include "grid_puzzle_localization/TileDelta.h"
+#include "grid_puzzle_localization/provider/window_server.hpp"
+#include "provider_map_cloud.hpp"
+#include "provider_msgs.hpp"
+#include "provider_params.hpp"
+
+namespace grid_puzzle_localization {
+
+class GridPuzzleProviderNodelet : public nodelet::Nodelet {
+ public:
+  ~GridPuzzleProviderNodelet() override {
+    {
+      std::lock_guard<std::mutex> lock(input_mutex_);
+      stop_ = true;
+    }
+    input_ready_.notify_all();
+    if (worker_.joinable()) worker_.join();
+  }
+
+ private:
+  static constexpr double kWarnPeriod = 5.0;  // [s] throttle of repeated warnings
+
+  void onInit() override {
+    ros::NodeHandle& nh = getMTNodeHandle();
+    ros::NodeHandle& pnh = getMTPrivateNodeHandle();
+    try {
+      config_ = loadProviderConfig(pnh);
+      // tile_delta names the directory the localizer reads: absolute, whatever the manager's working directory.
+      if (config_.tiles_dir.front() != '/') config_.tiles_dir = (std::filesystem::current_path() / config_.tiles_dir);
+    } catch (const std::invalid_argument& e) {
+      NODELET_FATAL("%s: %s", getName().c_str(), e.what());
+      throw;
+    }
+    delta_pub_ = nh.advertise<TileDelta>(
+        "tile_delta", 50, [this](const ros::SingleSubscriberPublisher& peer) { sendReset(peer); },
+        ros::SubscriberStatusCallback());
+    status_pub_ = pnh.advertise<ProviderStatus>("status", 10, true);
+    if (config_.publish_map_cloud)
+      map_cloud_ = std::make_unique<ProviderMapCloud>(nh, config_.map_frame, config_.map_cloud_period);
+    resend_srv_ = pnh.advertiseService("resend", &GridPuzzleProviderNodelet::onResend, this);
+    if (config_.pose_source == "odom") {
+      pose_sub_ = nh.subscribe("odom", 1, &GridPuzzleProviderNodelet::onOdom, this);
+      // The localizer publishes odom only once it has a map, which comes from here: the start pose seeds the
+      // first window.
+      initial_pose_sub_ = nh.subscribe("initialpose", 1, &GridPuzzleProviderNodelet::onInitialPose, this);
+    } else {
+      pose_sub_ = nh.subscribe("pose", 1, &GridPuzzleProviderNodelet::onPose, this);
+    }
+    if (config_.lost_max_half_side > 0.0)
+      status_sub_ = nh.subscribe("localizer_status", 1, &GridPuzzleProviderNodelet::onLocalizerStatus, this);
+    worker_ = std::thread(&GridPuzzleProviderNodelet::run, this);
+  }
+
+  // ------------------------------------------------------------ callbacks (never block on the window)
+  void onOdom(const nav_msgs::Odometry::ConstPtr& msg) {
+    if (frameOk(msg->header.frame_id)) offer(poseSampleOf(msg->pose.pose, msg->header.stamp, &msg->twist.twist));
+  }
+
+  void onPose(const geometry_msgs::PoseWithCovarianceStamped::ConstPtr& msg) {
+    if (frameOk(msg->header.frame_id)) offer(poseSampleOf(msg->pose.pose, msg->header.stamp, nullptr));
+  }
+
+  // A pose given by hand (rviz) ends a search's window: the window goes to that pose.
+  void onInitialPose(const geometry_msgs::PoseWithCovarianceStamped::ConstPtr& msg) {
+    {
+      std::lock_guard<std::mutex> lock(input_mutex_);
+      search_.reset();
+      tracking_again_ = true;
+    }
+    onPose(msg);
+  }
+
+  void onLocalizerStatus(const NdtStatus::ConstPtr& msg) {
+    {
+      std::lock_guard<std::mutex> lock(input_mutex_);
+      if (msg->lost && msg->search_radius > 0.0) {
+        search_ = SearchRegion{msg->search_x, msg->search_y, msg->search_radius, msg->header.stamp.toSec()};
+        tracking_again_ = false;
+      } else if (msg->match_accepted) {
+        search_.reset();
+        tracking_again_ = true;
+      } else {
+        return;
+      }
+    }
+    input_ready_.notify_one();
+  }
+
+  bool frameOk(const std::string& frame) {
+    if (frame.empty() || frame == config_.map_frame) return true;
+    NODELET_WARN_THROTTLE(kWarnPeriod, "ignoring a pose in frame '%s': poses must be in map_frame '%s'", frame.c_str(),
+                          config_.map_frame.c_str());
+    return false;
+  }
+
+  void offer(const PoseSample& pose) {
+    {
+      std::lock_guard<std::mutex> lock(input_mutex_);
+      latest_ = pose;
+    }
+    input_ready_.notify_one();
+  }
+
+  bool onResend(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& res) {
+    const std::optional<std::uint32_t> sent = broadcastReset();
+    res.success = sent.has_value();
+    res.message = sent ? "revision " + std::to_string(*sent) + ": reset delta of the whole window"
+                       : "no window yet: no pose has arrived";
+    return true;
+  }
+
+  // ------------------------------------------------------------ worker
+  void run() {
+    while (true) {
+      std::optional<PoseSample> pose;
+      std::optional<SearchRegion> search;
+      bool tracking_again = false;
+      {
+        std::unique_lock<std::mutex> lock(input_mutex_);
+        if (!latest_ && !search_ && !tracking_again_ && !stop_)
+          input_ready_.wait_for(lock, std::chrono::milliseconds(500));
+        if (stop_ || !ros::ok()) return;
+        std::swap(pose, latest_);
+        std::swap(search, search_);
+        std::swap(tracking_again, tracking_again_);
+      }
+      if (!openDirectory()) continue;
+      if (tracking_again) {
+        std::lock_guard<std::mutex> lock(server_mutex_);
+        server_->endSearch();  // the next pose is measured again: the window goes back to it
+      }
+      followDirectory();
+      if (search) coverSearch(*search);
+      if (pose) {
+        const auto start = std::chrono::steady_clock::now();
+        std::optional<Served> served;
+        {
+          std::lock_guard<std::mutex> lock(server_mutex_);
+          served = server_->onPose(*pose);
+        }
+        if (served) publish(*served, start);
+      }
+    }
+  }
+
+  // Opens the tile directory on the first call, and again after each failure (a disk mounted late); false while it
+  // cannot be opened.
+  bool openDirectory() {
+    if (server_) return true;
+    try {
+      TileDirectory directory = openTileDirectory(config_.tiles_dir, config_.tiles_grid_size);
+      const std::size_t tiles = directory.codes.size();
+      if (!directory.unparsable.empty())
+        NODELET_WARN("%s: %zu .pcd files are not tiles of side %g m and are ignored, e.g. %s",
+                     config_.tiles_dir.c_str(), directory.unparsable.size(), directory.grid_size,
+                     directory.unparsable.front().c_str());
+      const std::string source = directory.source;
+      std::lock_guard<std::mutex> lock(server_mutex_);
+      server_.emplace(config_.window, config_.lost_max_half_side, std::move(directory));
+      s_ = server_->tiles().directory().grid_size;
+      NODELET_INFO("%s: %zu tiles of %g m in %s (%s), n=%d k=%d, update distance %g m, listening on %s",
+                   getName().c_str(), tiles, s_, config_.tiles_dir.c_str(), source.c_str(),
+                   server_->tracker().config().n, server_->tracker().config().k, server_->tracker().updateDistance(),
+                   config_.pose_source.c_str());
+      return true;
+    } catch (const std::exception& e) {
+      NODELET_ERROR_THROTTLE(kWarnPeriod, "%s: %s; serving no tiles until it can be opened (retrying)",
+                             getName().c_str(), e.what());
+      std::this_thread::sleep_for(std::chrono::milliseconds(500));
+      return false;
+    }
+  }
+
+  // Serves the window that holds the lost localizer's search region.
+  void coverSearch(const SearchRegion& region) {
+    const auto start = std::chrono::steady_clock::now();
+    std::optional<Served> served;
+    bool first = false;
+    {
+      std::lock_guard<std::mutex> lock(server_mutex_);
+      first = !server_->searching();
+      served = server_->onSearch(region);
+    }
+    if (!served) return;
+    if (first) {
+      const TileBox b = served->window.bounds();
+      NODELET_WARN("the localizer is lost: the window grows to %.0f m x %.0f m around (%.1f, %.1f) m for its search",
+                   (b.i_max - b.i_min + 1) * s_, (b.j_max - b.j_min + 1) * s_, region.x, region.y);
+    }
+    publish(*served, start);
+  }
+
+  // Sends the whole window again when the tile directory was rewritten (new index revision).
+  void followDirectory() {
+    bool changed = false;
+    try {
+      std::lock_guard<std::mutex> lock(server_mutex_);
+      changed = server_->refresh();
+    } catch (const std::exception& e) {
+      NODELET_ERROR_THROTTLE(kWarnPeriod, "tile directory unusable, keeping the window as it is: %s", e.what());
+      return;
+    }
+    if (!changed) return;
+    NODELET_WARN("tile directory %s changed (index revision %s): sending the whole window again",
+                 config_.tiles_dir.c_str(), server_->tiles().revision().c_str());
+    broadcastReset();
+  }
+
+  void publish(const Served& served, std::chrono::steady_clock::time_point start) {
+    const ros::Time stamp = served.pose.t > 0.0 ? ros::Time(served.pose.t) : ros::Time::now();
+    std::size_t loaded = 0;
+    TileDelta::Ptr msg;
+    {
+      std::lock_guard<std::mutex> lock(server_mutex_);
+      msg = tileDeltaMsg(stamp, served.window, served.first, served.delta.added, served.delta.removed,
+                         served.delta.prefetch);
+      if (served.changed) {
+        msg->revision = ++revision_;
+        delta_pub_.publish(msg);
+      }
+      loaded = server_->tiles().loadedCount();
+      if (map_cloud_ && (served.first || !served.delta.added.empty() || !served.delta.removed.empty()))
+        map_cloud_->changed(windowPaths(), stamp);
+    }
+    reportOffMap(served, loaded);
+    const double update_ms =
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    status_pub_.publish(providerStatusMsg(*msg, served.window, loaded, update_ms));
+  }
+
+  void reportOffMap(const Served& served, std::size_t loaded) {
+    const bool off_map = loaded == 0;
+    if (off_map) {
+      const TileBox w = served.window.bounds(), m = server_->tiles().directory().bounds;
+      NODELET_WARN_THROTTLE(kWarnPeriod,
+                            "pose (%.1f, %.1f) m is off the map: no tile in window i %ld..%ld, j %ld..%ld (the map "
+                            "spans x %.0f..%.0f m, y %.0f..%.0f m); publishing an empty window until the pose returns",
+                            served.pose.x, served.pose.y, static_cast<long>(w.i_min), static_cast<long>(w.i_max),
+                            static_cast<long>(w.j_min), static_cast<long>(w.j_max), m.i_min * s_, (m.i_max + 1) * s_,
+                            m.j_min * s_, (m.j_max + 1) * s_);
+    } else if (off_map_) {
+      NODELET_INFO("pose (%.1f, %.1f) m is back on the map: %zu tiles in the window", served.pose.x, served.pose.y,
+                   loaded);
+    }
+    off_map_ = off_map;
+  }
+
+  // The window's tile files (server_mutex_ held).
+  std::vector<std::string> windowPaths() const {
+    std::vector<std::string> paths;
+    for (const TileKey& k : server_->tiles().loaded()) paths.push_back(server_->tiles().directory().tilePath(k));
+    return paths;
+  }
+
+  TileDelta::Ptr tileDeltaMsg(const ros::Time& stamp, const Window& window, bool reset,
+                              const std::vector<TileKey>& added, const std::vector<TileKey>& removed,
+                              const std::vector<TileKey>& prefetch) const {
+    return makeTileDelta(stamp, config_.map_frame, revision_, reset, s_, window, server_->tiles().directory().path,
+                         server_->tiles().revision(), added, removed, prefetch);
+  }
+
+  // A reset delta of the whole window at the current revision, to one new subscriber.
+  void sendReset(const ros::SingleSubscriberPublisher& peer) {
+    std::lock_guard<std::mutex> lock(server_mutex_);
+    if (!server_) return;
+    const auto whole = server_->whole();
+    if (whole)
+      peer.publish(
+          *tileDeltaMsg(ros::Time::now(), whole->first, true, whole->second.added, {}, whole->second.prefetch));
+  }
+
+  // A reset delta of the whole window as a new revision to every subscriber; its revision, or nullopt before the
+  // first window.
+  std::optional<std::uint32_t> broadcastReset() {
+    std::lock_guard<std::mutex> lock(server_mutex_);
+    if (!server_) return std::nullopt;
+    const auto whole = server_->whole();
+    if (!whole) return std::nullopt;
+    ++revision_;
+    delta_pub_.publish(
+        tileDeltaMsg(ros::Time::now(), whole->first, true, whole->second.added, {}, whole->second.prefetch));
+    if (map_cloud_) map_cloud_->changed(windowPaths(), ros::Time::now());
+    return revision_;
+  }
+
+  ProviderConfig config_;
+  std::mutex server_mutex_;  // the window server, the revision, and every publish on tile_delta
+  std::optional<WindowServer> server_;
+  double s_ = 0.0;  // tile side [m], set with server_
+  std::uint32_t revision_ = 0;
+  bool off_map_ = false;  // worker only
+
+  std::mutex input_mutex_;  // what the callbacks hand to the worker
+  std::condition_variable input_ready_;
+  std::optional<PoseSample> latest_;
+  std::optional<SearchRegion> search_;
+  bool tracking_again_ = false;
+  bool stop_ = false;
+  std::thread worker_;
+
+  std::unique_ptr<ProviderMapCloud> map_cloud_;
+  ros::Publisher delta_pub_, status_pub_;
+  ros::Subscriber pose_sub_, initial_pose_sub_, status_sub_;
+  ros::ServiceServer resend_srv_;
+};
+
+}  // namespace grid_puzzle_localization
+
+PLUGINLIB_EXPORT_CLASS(grid_puzzle_localization::GridPuzzleProviderNodelet, nodelet::Nodelet)
