@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
-"""Runs grid_puzzle_map_provider on a small tiled map written into a temp dir and drives poses along a
-path with turns. Checks the deltas (tiles by reference), the merged map_cloud (switched on here) and the
-status against a brute-force selection over the directory listing, and the standing start, a corrupt tile
-(named in the deltas, left out of map_cloud: the localizer reports it), late subscribers, ~resend, a pose
-far off the map, the window grown for a lost localizer's search, a tile directory rewritten under the node and a
-missing tile directory."""
+"""Runs a grid puzzle provider (the rospy node, or the nodelet standalone: the .test file's ~provider) on a small
+tiled map written into a temp dir and drives poses along a path with turns. Checks the deltas (tiles by
+reference), the merged map_cloud (switched on here) and the status against a brute-force selection over the
+directory listing, and the standing start, a corrupt tile (named in the deltas, left out of map_cloud: the localizer
+reports it), late subscribers, ~resend, a pose far off the map, the window grown for a lost localizer's search, a
+tile directory rewritten under the node and a missing tile directory (the rospy node exits, the nodelet keeps
+retrying and serves the directory once it exists)."""
 
 import math
 import os
@@ -47,6 +48,17 @@ print(m.reset)
 print(m.revision)
 print(" ".join(m.added_ids))
 """
+
+
+def provider_command(provider, name):
+    """The command that starts the rospy provider node or the provider nodelet standalone, named ``name``."""
+    if provider == "rospy":
+        return [
+            sys.executable,
+            os.path.join(rospkg.RosPack().get_path(PKG), "scripts", "grid_puzzle_map_provider"),
+            f"__name:={name}",
+        ]
+    return ["rosrun", "nodelet", "nodelet", "standalone", f"{PKG}/GridPuzzleProviderNodelet", f"__name:={name}"]
 
 
 def expected_bounds(x, y, heading_deg):
@@ -122,8 +134,8 @@ class MapProviderTest(unittest.TestCase):
         cls.deltas = Recorder("/tile_delta", TileDelta)
         cls.clouds = Recorder("/map_cloud", PointCloud2)
         cls.status = Recorder("/provider/status", ProviderStatus)
-        script = os.path.join(rospkg.RosPack().get_path(PKG), "scripts", "grid_puzzle_map_provider")
-        cls.proc = subprocess.Popen([sys.executable, script, "__name:=provider", "odom:=/odom"])
+        cls.provider = rospy.get_param("~provider")
+        cls.proc = subprocess.Popen([*provider_command(cls.provider, "provider"), "odom:=/odom"])
         cls.odom = rospy.Publisher("/odom", Odometry, queue_size=100)
         cls.localizer_status = rospy.Publisher("/localizer_status", NdtStatus, queue_size=10)
         cls.initialpose = rospy.Publisher("/initialpose", PoseWithCovarianceStamped, queue_size=10)
@@ -300,15 +312,39 @@ class MapProviderTest(unittest.TestCase):
         self.apply_new_deltas()
         self.assert_map_cloud_is(set(self.mirror))
 
-    def test_6_missing_tile_directory_exits_with_a_clear_message(self):
-        rospy.set_param("/broken_provider/tiles/dir", os.path.join(self.dir, "nope"))
+    def test_6_missing_tile_directory_is_named(self):
+        missing = os.path.join(self.dir, "nope")
+        rospy.set_param("/broken_provider/tiles/dir", missing)
         rospy.set_param("/broken_provider/tiles/grid_size", S)
-        script = os.path.join(rospkg.RosPack().get_path(PKG), "scripts", "grid_puzzle_map_provider")
-        done = subprocess.run(
-            [sys.executable, script, "__name:=broken_provider"], capture_output=True, text=True, timeout=WAIT
-        )
-        self.assertEqual(done.returncode, 2)
-        self.assertIn("does not exist", done.stdout + done.stderr)
+        command = [*provider_command(self.provider, "broken_provider"), "tile_delta:=/broken_delta"]
+        if self.provider == "rospy":
+            done = subprocess.run(command, capture_output=True, text=True, timeout=WAIT)
+            self.assertEqual(done.returncode, 2)
+            self.assertIn("does not exist", done.stdout + done.stderr)
+            return
+        # The nodelet shares the localizer's process: it names the directory, keeps running and retries.
+        proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        try:
+            deadline = time.monotonic() + WAIT
+            line = ""
+            while "does not exist" not in line and time.monotonic() < deadline:
+                line = proc.stdout.readline()
+            self.assertIn(f"{missing} does not exist", line)
+            self.assertIsNone(proc.poll())
+            shutil.copytree(self.dir, missing)
+            deltas = Recorder("/broken_delta", TileDelta)
+            publisher = rospy.Publisher("/odom", Odometry, queue_size=10)
+            for _ in range(int(WAIT / 0.2)):
+                self.send(5.3, 5.3)
+                if deltas.messages:
+                    break
+                rospy.sleep(0.2)
+            first = deltas.wait_for(lambda d: d.reset, "a first window once the directory exists")
+            self.assertEqual(first.tile_dir, missing)
+            publisher.unregister()
+        finally:
+            proc.terminate()
+            proc.wait(timeout=WAIT)
 
 
 if __name__ == "__main__":
