@@ -17,9 +17,10 @@ namespace grid_puzzle_localization {
 struct GlobalLocalizationParams {
   /// [s] >= 0: with no initial pose this long after the first scan, search by itself (0 = never).
   double auto_start_timeout = 0.0;
-  std::optional<Eigen::Vector2d> center;  ///< [m] coarse position; unset: a hint on initialpose_hint, else the map
-  double size = 40.0;                     ///< [m] > 0, side of the square searched
-  double yaw_range = M_PI;                ///< [rad] in (0, pi], half-width of the yaw range searched
+  /// [m] coarse position when no hint is known (initialpose_hint, else the saved ~last_pose); unset: the map
+  std::optional<Eigen::Vector2d> center;
+  double size = 40.0;       ///< [m] > 0, side of the square searched
+  double yaw_range = M_PI;  ///< [rad] in (0, pi], half-width of the yaw range searched
 };
 
 struct LocalizerRosParams {
@@ -35,6 +36,11 @@ struct LocalizerRosParams {
   /// tiles mode by reference: byte budget of the read-ahead cache [MiB], >= 0 (0 = no prefetch).
   double tile_cache_mb = MapUpdateWorker::kDefaultTileCacheMb;
   std::optional<Eigen::Isometry3d> initial_pose;  ///< from ~initial_pose [x y z roll pitch yaw]
+  /// [Hz] >= 0: how often the newest published pose is written to ~last_pose on the parameter server (0 = never).
+  double save_pose_rate = 0.5;
+  /// From ~last_pose/pose [x y z roll pitch yaw], as an earlier process of this nodelet saved it (a respawn):
+  /// the centre of the automatic global search, never an initial pose (the vehicle moved on meanwhile).
+  std::optional<Eigen::Isometry3d> last_pose;
   /// Per-point time field of the scans: FLOAT32/FLOAT64 [s] or UINT32 [ns] after header.stamp.
   std::string time_field = "time";
   GlobalLocalizationParams global_localization;
@@ -44,7 +50,7 @@ struct LocalizerRosParams {
 
 /// Reads every parameter from `pnh`. A value out of range or unusable (unknown map_source or search method,
 /// pcd mode without a file, malformed initial_pose) throws std::invalid_argument with a message that names the
-/// parameter and says what to fix.
+/// parameter and says what to fix. A malformed ~last_pose (state, not a setting) is logged and ignored.
 LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::string& log_name);
 
 }  // namespace grid_puzzle_localization

@@ -1,7 +1,8 @@
 // NDT localizer nodelet: PointCloud2 -> core Localizer -> Odometry, TF and status. All state and maths
 // live in the core (localizer.hpp); this file wires topics, services and frames to it. Its parts are files of
 // their own here: parameters, message conversions, the scan slot, tile delta input, TF output, the throttle of
-// fusion warnings and the timer of the automatic global search.
+// fusion warnings and the timer of the automatic global search. The last published pose is saved on the parameter
+// server (~last_pose) so that a respawned process searches around it.
 #include <geometry_msgs/PoseWithCovarianceStamped.h>
 #include <nav_msgs/Odometry.h>
 #include <nodelet/nodelet.h>
@@ -16,6 +17,7 @@
 #include <atomic>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <pluginlib/class_list_macros.hpp>
 
@@ -53,8 +55,21 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     }
     if (params_.initial_pose) localizer_->setDefaultInitialPose(*params_.initial_pose);
     // Consumed: a respawned process must not start again from the launch's pose (the vehicle has moved on);
-    // it waits for initialpose or searches around initialpose_hint (global_localization/*).
+    // it waits for initialpose or searches around the pose it saved in ~last_pose (global_localization/*).
     if (params_.initial_pose) pnh.deleteParam("initial_pose");
+    if (params_.last_pose && !params_.initial_pose) {
+      hint_ = params_.last_pose->translation().head<2>();  // an initialpose_hint message replaces it
+      if (params_.global_localization.auto_start_timeout > 0.0)
+        NODELET_INFO(
+            "no pose yet: resumes searching around (%.2f, %.2f), the last pose saved in ~last_pose, %.1f s "
+            "after the first scan unless initialpose comes",
+            hint_->x(), hint_->y(), params_.global_localization.auto_start_timeout);
+      else
+        NODELET_INFO(
+            "the last pose saved in ~last_pose, (%.2f, %.2f), is the hint of a global search; none starts "
+            "by itself (global_localization/auto_start_timeout is 0)",
+            hint_->x(), hint_->y());
+    }
     localizer_->map().setTileCacheMb(params_.tile_cache_mb);
 
     tf_buffer_ = std::make_unique<tf2_ros::Buffer>();
@@ -85,6 +100,10 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       odom_in_sub_ = nh.subscribe("odom_in", 50, &NdtLocalizerNodelet::onOdometryIn, this);
     hint_sub_ = nh.subscribe("initialpose_hint", 1, &NdtLocalizerNodelet::onHint, this);
     global_srv_ = pnh.advertiseService("global_localize", &NdtLocalizerNodelet::onGlobalLocalize, this);
+    // The parameter server is an XML-RPC call away: the pose is written from the multi-threaded queue.
+    if (params_.save_pose_rate > 0.0)
+      save_pose_timer_ = mt_nh.createWallTimer(ros::WallDuration(1.0 / params_.save_pose_rate),
+                                               &NdtLocalizerNodelet::onSavePoseTimer, this);
     NODELET_INFO("%s: map source '%s', frames %s -> %s, resolution %.2f m, search %s, fusion %s", getName().c_str(),
                  params_.map_source.c_str(), params_.map_frame.c_str(), params_.base_frame.c_str(),
                  params_.core.ndt.resolution, toString(params_.core.ndt.search), toString(params_.core.fusion.mode));
@@ -249,6 +268,25 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     if (xy.allFinite()) hint_ = xy;
   }
 
+  // --------------------------------------------------------------- saved pose (multi-threaded queue)
+  // Writes the newest published pose as ~last_pose {pose: [x y z roll pitch yaw] (m, rad), stamp (s)}: one
+  // setParam call, so a reader never sees a pose with another pose's stamp. Nothing new published: no call.
+  void onSavePoseTimer(const ros::WallTimerEvent&) {
+    PoseToSave pose;
+    {
+      std::lock_guard<std::mutex> lock(pose_to_save_mutex_);
+      if (pose_to_save_.seq == saved_seq_) return;
+      pose = pose_to_save_;
+      saved_seq_ = pose.seq;
+    }
+    XmlRpc::XmlRpcValue value, xyz_rpy;
+    xyz_rpy.setSize(6);
+    for (int i = 0; i < 6; ++i) xyz_rpy[i] = pose.xyz_rpy(i);
+    value["pose"] = xyz_rpy;
+    value["stamp"] = pose.stamp;
+    getPrivateNodeHandle().setParam("last_pose", value);
+  }
+
   // The search region of a request: see srv/GlobalLocalize.srv.
   bool onGlobalLocalize(GlobalLocalize::Request& req, GlobalLocalize::Response& res) {
     const GlobalLocalizationParams& g = params_.global_localization;
@@ -327,6 +365,11 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     if (!out.publish) return;  // lost for longer than lost/max_coast_time: no pose rather than a wrong one
     odom_pub_.publish(toOdometryMsg(out, scan_header.stamp, params_.map_frame, params_.base_frame));
     if (params_.publish_tf) map_tf_->send(out.pose, scan_header.stamp);
+    if (params_.save_pose_rate > 0.0) {
+      const XyzRpy xyz_rpy = xyzRpyFromPose(out.pose);
+      std::lock_guard<std::mutex> lock(pose_to_save_mutex_);
+      pose_to_save_ = PoseToSave{xyz_rpy, scan_header.stamp.toSec(), pose_to_save_.seq + 1};
+    }
 
     if (params_.publish_aligned_points && aligned_pub_.getNumSubscribers() > 0) {
       std_msgs::Header h = scan_header;
@@ -347,9 +390,18 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   int map_replacements_seen_ = 0;                          // scan thread: map_replacements_ at the last map swap
   WarningThrottle fusion_warnings_{5.0};                   // scan thread
   GlobalSearchTimer global_search_timer_{0.0};             // scan thread; set from the parameters in onInit
-  std::optional<Eigen::Vector2d> hint_;                    // last initialpose_hint (map frame)
+  std::optional<Eigen::Vector2d> hint_;  // last initialpose_hint, else the saved ~last_pose (map frame)
   LatestScanSlot<sensor_msgs::PointCloud2::ConstPtr> scan_slot_;  // points (MT queue) -> scan thread
   std::uint64_t warned_drops_ = 0;                                // scan thread only
+  struct PoseToSave {
+    XyzRpy xyz_rpy = XyzRpy::Zero();  // [m, rad] map_T_base as published
+    double stamp = 0.0;               // [s] the scan's
+    std::uint64_t seq = 0;            // poses published so far
+  };
+  std::mutex pose_to_save_mutex_;  // guards pose_to_save_ (scan thread) and saved_seq_ (save timer)
+  PoseToSave pose_to_save_;
+  std::uint64_t saved_seq_ = 0;  // pose_to_save_.seq last written to ~last_pose
+  ros::WallTimer save_pose_timer_;
 
   ros::Publisher odom_pub_, status_pub_, aligned_pub_;
   ros::Subscriber points_sub_, initial_pose_sub_, imu_sub_, odom_in_sub_, map_sub_, hint_sub_;

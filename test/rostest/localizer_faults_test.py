@@ -2,7 +2,7 @@
 """Faults against the running localization stack (see localizer_faults.test).
 
 The package's launch files (ndt_localizer.launch, grid_puzzle_map_provider.launch) start the localizer nodelet
-in tiles mode, its manager, last_pose_hint and the map provider under roslaunch, all with respawn="true". One
+in tiles mode, its manager and the map provider under roslaunch, all with respawn="true". One
 synthetic drive is played with `rosbag play --clock`; during it, in bag time:
 - TILE_FAULTS: three tiles ahead of the vehicle are damaged (one deleted, one truncated, one replaced by a
   directory: the test runs as root, so a file made unreadable with chmod would still be read), then the tile
@@ -15,12 +15,16 @@ synthetic drive is played with `rosbag play --clock`; during it, in bag time:
   in for the uninterrupted run: ndt_localizer.test holds the uninterrupted tiles run to 5 cm of it, and this test
   checks the poses before the kill against the same 5 cm.
 - LOCALIZER_KILL: the localizer's nodelet manager is killed with SIGKILL: both respawn; the new nodelet has no
-  pose and must publish nothing until its global search around the last published position (initialpose_hint)
-  finds the vehicle; from then on within 5 cm. The recovery time is from the kill to the first pose published."""
+  pose and must publish nothing until its global search around the last published position finds the vehicle;
+  from then on within 5 cm. That position is the one the killed nodelet saved on the parameter server
+  (~last_pose, polled during the drive and read at the kill): the respawned nodelet logs that it searches around
+  it, and no other node (no relay of the pose) runs in the stack. The recovery time is from the kill to the first
+  pose published."""
 
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -30,10 +34,13 @@ import unittest
 from pathlib import Path
 
 import numpy as np
+import rosgraph
+import rosnode
 import rospy
 import rostest
 from fixtures import localizer_replay as replay
 from fixtures import synthetic_scene as ss
+from fixtures.saved_pose import SavedPoseSampler, read_saved_pose
 from fixtures.synthetic_bag import write_drive_bag
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from grid_puzzle_localization.msg import NdtStatus, TileDelta
@@ -61,6 +68,8 @@ RATE = 0.25  # playback rate: the localizer, the provider and the player share 2
 TILE = 10.0  # [m]
 WAIT = 60.0  # [s] upper bound on waiting for a process or a connection (never asserted as a time)
 TOLERANCE = 0.05  # [m]
+LOCALIZER = "/ndt_localizer"
+RESUMES = re.compile(r"resumes searching around \(([-0-9.]+), ([-0-9.]+)\)")  # the respawned nodelet's INFO
 LAUNCH = """<launch>
   <param name="use_sim_time" value="true"/>
   <include file="$(find grid_puzzle_localization)/launch/ndt_localizer.launch">
@@ -94,6 +103,7 @@ class Recorder:
         self.resets: list[float] = []  # arrival of reset deltas
         self.added: list[tuple[float, set]] = []  # (arrival, tiles the delta adds)
         self.errors: list[tuple[float, str]] = []
+        self.resumes: list[tuple[float, np.ndarray]] = []  # (arrival, (x, y) the respawned nodelet searches around)
         rospy.Subscriber("/odom", Odometry, self._on_odom, queue_size=100)
         rospy.Subscriber("/ndt_localizer/status", NdtStatus, self._on_status, queue_size=100)
         rospy.Subscriber("/tile_delta", TileDelta, self._on_delta, queue_size=100)
@@ -119,6 +129,9 @@ class Recorder:
     def _on_log(self, msg: Log) -> None:
         if msg.level >= Log.ERROR:
             self.errors.append((time.monotonic(), msg.msg))
+        match = RESUMES.search(msg.msg)
+        if match:
+            self.resumes.append((time.monotonic(), np.array([float(match.group(1)), float(match.group(2))])))
 
     def window_at(self, t: float) -> frozenset:
         before = [w for arrival, w in self.windows if arrival <= t]
@@ -167,6 +180,7 @@ class LocalizerFaultsTest(unittest.TestCase):
             "manager": node_pid("/localizer_manager", NAME, WAIT),
         }
         cls.kills: dict[str, float] = {}  # monotonic time of each fault
+        cls.saved = SavedPoseSampler(LOCALIZER, NAME)  # the localizer's ~last_pose during the drive
         cls.kill_stamps: dict[str, float] = {}  # bag time of each fault [s from the start]
         play = subprocess.Popen(
             ["rosbag", "play", "--clock", "-q", "-d", "2", "-r", str(RATE), f"{cls.tmp.name}/drive.bag"]
@@ -186,8 +200,11 @@ class LocalizerFaultsTest(unittest.TestCase):
             cls.kills[name] = time.monotonic()
             cls.kill_stamps[name] = rospy.Time.now().to_sec() - START
             act()
+        # What the killed nodelet left on the parameter server: nothing writes it until the respawn publishes.
+        cls.saved_at_kill = read_saved_pose(rosgraph.Master(NAME), LOCALIZER)
         play.wait(timeout=DURATION / RATE + WAIT)
         time.sleep(2.0)
+        cls.saved.stop()
         cls.respawned = {
             name: node_pid(f"/{node}", NAME, WAIT, other_than=cls.pids[name])
             for name, node in (("provider", "grid_puzzle_map_provider"), ("manager", "localizer_manager"))
@@ -303,8 +320,32 @@ class LocalizerFaultsTest(unittest.TestCase):
             max_error_after_m=round(max(self.error(s, xyz) for s, xyz in after), 4),
         )
 
+    def test_saved_pose_follows_the_drive(self) -> None:
+        kill = self.kills["manager"]
+        before = [(stamp - START, pose) for arrival, stamp, pose in self.saved.samples if arrival < kill]
+        # At the default 0.5 Hz, a write every 2 s of the 44 s (at 0.25x) before the kill.
+        self.assertGreaterEqual(len(before), 5, f"~last_pose changed only {len(before)} times before the kill")
+        for s, pose in before:
+            self.assertLess(self.error(s, pose[:3, 3]), TOLERANCE, f"~last_pose at {s:.1f} s off the ground truth")
+        self.assertIsNotNone(self.saved_at_kill, "no ~last_pose on the parameter server at the kill")
+        stamp, pose = self.saved_at_kill
+        self.assertLess(self.error(stamp - START, pose[:3, 3]), TOLERANCE, "~last_pose at the kill off the truth")
+        last_published = max(s for arrival, s, _ in self.rec.odom if arrival < kill)
+        # Saved at most a save period (2 s wall, 0.5 s of bag time at 0.25x) before the last pose published;
+        # 2 s of bag time under load.
+        self.assertGreater(stamp - START, last_published - 2.0, "~last_pose at the kill lags the drive")
+
     def test_localizer_sigkill_resumes_by_global_search_around_last_pose(self) -> None:
         kill = self.kills["manager"]
+        # No process relays the pose: only the stack, the test and roslaunch's rosout are on the master.
+        nodes = rosnode.get_node_names()
+        self.assertFalse([n for n in nodes if "last_pose" in n], f"a relay node runs: {nodes}")
+        # The respawned nodelet took the pose the killed one saved as the centre of its search.
+        self.assertIsNotNone(self.saved_at_kill, "no ~last_pose on the parameter server at the kill")
+        resumes = [xy for arrival, xy in self.rec.resumes if arrival > kill]
+        self.assertTrue(resumes, "the respawned nodelet did not log that it resumes around the saved pose")
+        saved_xy = self.saved_at_kill[1][:2, 3]
+        self.assertLess(float(np.linalg.norm(resumes[0] - saved_xy)), 0.01, f"searches around {resumes[0]}")
         # A pose for a scan stamped before the kill comes from the dying process, even when it arrives after the
         # kill (its status may never have gone out); the respawn only sees scans played after it started.
         respawn = self.kill_stamps["manager"]
@@ -326,7 +367,8 @@ class LocalizerFaultsTest(unittest.TestCase):
         last_before = max(s for arrival, s, _ in self.rec.odom if arrival < kill)
         record(
             "localizer nodelet manager SIGKILL mid-drive",
-            "manager and nodelet respawned; no pose until the global search around the last pose; then within 5 cm",
+            "manager and nodelet respawned; no pose until the global search around the saved ~last_pose; then "
+            "within 5 cm",
             round(first_arrival - kill, 2),
             data_lost=f"{first_stamp - last_before:.1f} s of drive without a pose (bag time, played at {RATE}x)",
             max_error_after_m=round(self.error(worst[1], worst[2]), 4),
