@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""The map provider killed with SIGKILL mid-drive: roslaunch respawns it (respawn="true"), and the new process
+"""The map provider killed with SIGKILL mid-drive (the rospy node, or with the nodelet the manager process that holds
+it; the .test file's ~provider): roslaunch respawns it (respawn="true"), and the new process
 re-syncs its subscribers with a reset delta of the current window. A mirror of the tiles, built from the deltas
 (by reference: tile names and their directory) as the localizer builds its map, must equal the window's existing
 tile files before the kill and again after the reset; the time from the kill to that reset is the recovery time."""
@@ -31,9 +32,18 @@ from tile_truth import brute_force_window_files
 PKG = "grid_puzzle_localization"
 S, N, K = 2.0, 1, 2
 WAIT = 60.0  # [s] upper bound on waiting for a message (never asserted as a time)
+NODES = {
+    "rospy": """<node pkg="grid_puzzle_localization" type="grid_puzzle_map_provider" name="provider" respawn="true"
+        respawn_delay="0" output="log">""",
+    "nodelet": """<node pkg="nodelet" type="nodelet" name="provider_manager" args="manager" respawn="true"
+        respawn_delay="0" output="log"/>
+  <node pkg="nodelet" type="nodelet" name="provider" respawn="true" respawn_delay="0" output="log"
+        args="load grid_puzzle_localization/GridPuzzleProviderNodelet provider_manager">""",
+}
+# The process that holds the provider: the one killed.
+HOLDER = {"rospy": "/provider", "nodelet": "/provider_manager"}
 LAUNCH = """<launch>
-  <node pkg="grid_puzzle_localization" type="grid_puzzle_map_provider" name="provider" respawn="true"
-        respawn_delay="0" output="log">
+  {node}
     <param name="tiles/dir" value="{dir}"/>
     <param name="tiles/grid_size" value="{s}"/>
     <param name="window/n" value="{n}"/>
@@ -90,11 +100,12 @@ class Mirror:
 class ProviderRespawnTest(unittest.TestCase):
     def setUp(self):
         rospy.init_node("provider_respawn_test")
+        self.provider = rospy.get_param("~provider")
         self.dir = tempfile.mkdtemp(prefix="gpm_tiles_")
         write_tiles(self.dir, [(i, j) for i in range(40) for j in range(-4, 5)], S, count=30, seed=3)
         self.launch_file = os.path.join(self.dir, "provider.launch")
         with open(self.launch_file, "w") as f:
-            f.write(LAUNCH.format(dir=self.dir, s=S, n=N, k=K))
+            f.write(LAUNCH.format(node=NODES[self.provider], dir=self.dir, s=S, n=N, k=K))
         self.mirror = Mirror(self.dir)
         self.launch = subprocess.Popen(["roslaunch", self.launch_file], stdout=subprocess.DEVNULL)
         self.odom = rospy.Publisher("/odom", Odometry, queue_size=10)
@@ -123,6 +134,8 @@ class ProviderRespawnTest(unittest.TestCase):
             time.sleep(0.1)
 
     def test_without_map_cloud_the_node_never_loads_numpy(self):
+        if self.provider != "rospy":
+            self.skipTest("the rospy node's memory floor; the nodelet has no Python")
         # Tiles travel by reference and map_cloud is off: the node's memory stays at rospy's floor without numpy.
         self.mirror.wait_for(lambda t, d: d.revision >= 3, "revision 3 (driving)")
         with open(f"/proc/{node_pid('/provider', '/provider_respawn_test', WAIT)}/maps") as f:
@@ -133,12 +146,12 @@ class ProviderRespawnTest(unittest.TestCase):
     def test_sigkill_mid_drive_is_respawned_and_resynced(self):
         _, before, keys = self.mirror.wait_for(lambda t, d: d.revision >= 5, "revision 5 (driving)")
         self.mirror.check_against_files(before, keys)
-        pid = node_pid("/provider", "/provider_respawn_test", WAIT)
+        pid = node_pid(HOLDER[self.provider], "/provider_respawn_test", WAIT)
         killed = time.monotonic()
         os.kill(pid, signal.SIGKILL)
         t, reset, keys = self.mirror.wait_for(lambda t, d: t > killed and d.reset, "reset after the kill")
         recovery = t - killed
-        node_pid("/provider", "/provider_respawn_test", WAIT, other_than=pid)  # respawned
+        node_pid(HOLDER[self.provider], "/provider_respawn_test", WAIT, other_than=pid)  # respawned
         self.assertTrue(math.isfinite(recovery))
         self.mirror.check_against_files(reset, keys)
         # The drive goes on: later deltas keep the mirror equal to the window.
@@ -146,7 +159,7 @@ class ProviderRespawnTest(unittest.TestCase):
         self.mirror.check_against_files(after, keys)
         self.assertEqual(self.mirror.gaps, [])
         record(
-            "provider SIGKILL mid-drive",
+            f"provider ({self.provider}) SIGKILL mid-drive",
             "respawned by roslaunch; reset delta of the current window",
             round(recovery, 2),
         )
