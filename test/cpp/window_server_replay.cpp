@@ -2,12 +2,14 @@
 // test_window_server_equality.py can hold the C++ WindowServer (the provider nodelet's) equal to the Python one
 // (the rospy provider's). First line: {"dir": DIR, "grid_size": S, "max_half_side": M, "window": {n, k,
 // update_distance, heading_source, lookahead_time, preset}}; then one command a line: {"pose": {x, y, t, yaw,
-// velocity}}, {"search": {x, y, radius, t}}, {"end_search": true} or {"whole": true}.
+// velocity}}, {"search": {x, y, radius, t}}, {"end_search": true} or {"whole": true}. With --defaults it prints the
+// provider nodelet's parameter defaults as {"group/name": value} (test_provider_config holds them equal to Python's).
 #include <cmath>
 #include <iostream>
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "grid_puzzle_localization/provider/provider_config.hpp"
 #include "grid_puzzle_localization/provider/window_server.hpp"
 
 using grid_puzzle_localization::Served;
@@ -44,7 +46,28 @@ json servedJson(const std::optional<Served>& served, double s) {
 
 }  // namespace
 
-int main() {
+json providerDefaults() {
+  const grid_puzzle_localization::ProviderConfig c;
+  return {{"tiles/dir", c.tiles_dir},
+          {"tiles/grid_size", c.tiles_grid_size},
+          {"window/n", c.window.n},
+          {"window/k", c.window.k},
+          {"window/update_distance", c.window.update_distance},
+          {"window/heading_source", c.window.heading_source},
+          {"window/lookahead_time", c.window.lookahead_time},
+          {"window/preset", c.window.preset},
+          {"lost/max_half_side", c.lost_max_half_side},
+          {"pose_source", c.pose_source},
+          {"publish_map_cloud", c.publish_map_cloud},
+          {"map_cloud_period", c.map_cloud_period},
+          {"map_frame", c.map_frame}};
+}
+
+int main(int argc, char** argv) {
+  if (argc > 1 && std::string(argv[1]) == "--defaults") {
+    std::cout << providerDefaults().dump() << '\n';
+    return 0;
+  }
   std::string line;
   if (!std::getline(std::cin, line)) return 2;
   const json setup = json::parse(line);

@@ -1,6 +1,8 @@
 """The provider's parameters: the YAML documents exactly the dataclass defaults; loading and checking."""
 
+import json
 import re
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -26,6 +28,13 @@ def test_yaml_documents_every_parameter_with_its_default_and_sets_none():
     text = YAML.read_text()
     assert yaml.safe_load(text) is None  # launch files and YAML override only what a user sets
     assert documented_defaults(text) == parameter_defaults()
+
+
+def test_the_nodelet_has_the_same_parameters_and_defaults():
+    from test_window_server_equality import replay_program
+
+    out = subprocess.run([str(replay_program()), "--defaults"], capture_output=True, text=True, check=True).stdout
+    assert json.loads(out) == parameter_defaults()
 
 
 def test_load_config_reads_groups_and_converts_types():
