@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # make demo: simulate the full-size courtyard world, 100 s of walking (cached in results/demo/scenario), then
-# run the experiment in global and grid puzzle modes and write the report and plots to results/demo/.
+# run the experiment in its default modes: global, grid_puzzle (the provider nodelet in the localizer's manager,
+# what a user gets) and grid_puzzle_rospy (the paper's setup, a rospy provider process). Prints the grid puzzle
+# modes against the global map (nodelet first) and writes the report and plots to results/demo/.
 # Runs from a shell that sourced the devel space (the Makefile does that).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -17,4 +19,4 @@ if [[ ! -f "$scenario/scenario.yaml" || "$(cat "$stamp" 2>/dev/null)" != "${sim_
 else
   echo "demo: reusing the scenario in $scenario"
 fi
-python3 "$root/scripts/gpm" experiment "$scenario" -o "$out" --preset demo --modes global grid_puzzle --ndt-threads 2
+python3 "$root/scripts/gpm" experiment "$scenario" -o "$out" --preset demo --ndt-threads 2

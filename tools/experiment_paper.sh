@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # make experiment-paper: both paper scenarios at full size with the paper's presets (courtyard n 17 k 10,
-# urban n 25 k 20, s 2 m). Long-running (simulation plus real-time playback per mode); not part of CI.
+# urban n 25 k 20, s 2 m), in the three modes global, grid_puzzle (the provider nodelet) and grid_puzzle_rospy
+# (the paper's setup, the rospy provider). Long-running (simulation plus real-time playback per mode); not in CI.
 # Scenarios, tiles, blocks and submaps go to results/paper_data/ (large, not committed); summary, report,
 # plots and the storage table to results/paper/<scenario>/ (small, committed).
 # Arguments: the scenarios to run (default: courtyard urban).
@@ -20,7 +21,7 @@ for scenario in "$@"; do
   # One NDT thread, the localizer's default: CPU time is then the work itself, not OpenMP spinning. NDT alone, as
   # in the paper (the bags carry an IMU, which fusion/mode auto would fuse).
   "${gpm[@]}" experiment "$scn" --preset "$scenario" --tiles "$data/${scenario}_tiles_s2" --ndt-threads 1 \
-    --fusion none -o "$out"
+    --fusion none --modes global grid_puzzle grid_puzzle_rospy -o "$out"
   # Storage of the four representations of the same prior map (global, tiles, blocks, fixed submaps).
   blocks="$data/${scenario}_blocks_S$block_size"
   submaps="$data/${scenario}_submaps_L$block_size"

@@ -203,6 +203,32 @@ def test_protocols_and_reductions():
         protocol_processes("grid_puzzle", {"localizer": "/loc"}, grid_log, "paper")
 
 
+def test_the_provider_nodelet_is_not_counted_twice():
+    """grid_puzzle: the provider nodelet lives in the localizer's manager, so both roles name that process and the
+    paper protocol counts it once; grid_puzzle_rospy (the paper's setup) sums the manager and the provider."""
+    log = fake_log(
+        {
+            "/mgr": {"cpu_percent": [50, 70], "rss_bytes": [100e6, 120e6]},
+            "/loader": {"cpu_percent": [1, 1], "rss_bytes": [8e6, 8e6]},
+            "/prov": {"cpu_percent": [10, 20], "rss_bytes": [50e6, 52e6]},
+        }
+    )
+    nodelet = {"localizer": "/mgr", "map_provider": "/mgr"}
+    rospy = {"localizer": "/mgr", "map_provider": "/prov"}
+    assert protocol_processes("grid_puzzle", nodelet, log, "paper") == ["/mgr"]
+    assert protocol_processes("grid_puzzle_rospy", rospy, log, "paper") == ["/mgr", "/prov"]
+    assert protocol_processes("grid_puzzle", nodelet, log, "total") == ["/mgr", "/loader", "/prov"]
+    paper = mode_resources("grid_puzzle", nodelet, log)["paper"]
+    assert (paper["cpu_percent"]["mean"], paper["rss_bytes"]["mean"]) == (60.0, 110e6)
+    paper = mode_resources("grid_puzzle_rospy", rospy, log)["paper"]
+    assert (paper["cpu_percent"]["mean"], paper["rss_bytes"]["mean"]) == (75.0, 161e6)
+    empty = fake_log(
+        {"/mgr": {"cpu_percent": [1], "rss_bytes": [30e6]}, "/prov": {"cpu_percent": [1], "rss_bytes": [40e6]}}
+    )
+    assert map_memory("grid_puzzle", nodelet, log, empty)["paper"]["map_bytes"] == pytest.approx(110e6 - 30e6)
+    assert map_memory("grid_puzzle_rospy", rospy, log, empty)["paper"]["map_bytes"] == pytest.approx(80e6 + 11e6)
+
+
 def test_map_memory_is_rss_over_the_empty_map_run():
     roles_g = {"localizer": "/loc", "map_provider": "/prov"}
     full = {

@@ -7,7 +7,8 @@ import pytest
 from grid_puzzle_localization.cli import build_parser, main
 from grid_puzzle_localization.commands.experiment import config_from_args
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.experiment.runner import launch_args
+from grid_puzzle_localization.experiment.modes import EMPTY_MAP_MODES
+from grid_puzzle_localization.experiment.runner import launch_args, mode_roles, required_nodes
 from grid_puzzle_localization.experiment.scenario import read_scenario
 
 
@@ -45,7 +46,7 @@ def test_presets_and_overrides(tmp_path):
     args = build_parser().parse_args(["experiment", str(d), "-o", "out", "--preset", "urban", "--k", "7"])
     cfg = config_from_args(args)
     assert (cfg.window.n, cfg.window.k, cfg.window.grid_size_m) == (25, 7, 2.0)
-    assert cfg.modes == ["global", "grid_puzzle"] and cfg.scenario_name == "courtyard"
+    assert cfg.modes == ["global", "grid_puzzle", "grid_puzzle_rospy"] and cfg.scenario_name == "courtyard"
     cfg.check()
 
 
@@ -96,3 +97,25 @@ def test_unknown_fusion_is_refused(tmp_path):
     cfg = config_from_args(build_parser().parse_args(["experiment", str(scenario_dir(tmp_path)), "-o", "out"]))
     with pytest.raises(UserError, match="unknown fusion 'ukf' \\(use none, sliding_window, auto\\)"):
         dataclasses.replace(cfg, fusion="ukf").check()
+
+
+def test_grid_puzzle_runs_the_provider_nodelet_and_grid_puzzle_rospy_the_papers_rospy_provider(tmp_path):
+    d = scenario_dir(tmp_path)
+    cfg = config_from_args(build_parser().parse_args(["experiment", str(d), "-o", "out"]))
+    tiles = tmp_path / "tiles"
+    args = {mode: launch_args(cfg, mode, cfg.global_map, tiles, [0.0] * 6) for mode in cfg.modes}
+    assert (args["grid_puzzle"]["mode"], args["grid_puzzle"]["provider"]) == ("grid_puzzle", "nodelet")
+    assert (args["grid_puzzle_rospy"]["mode"], args["grid_puzzle_rospy"]["provider"]) == ("grid_puzzle", "rospy")
+    assert args["grid_puzzle"]["tiles"] == args["grid_puzzle_rospy"]["tiles"] == tiles.resolve()
+    assert args["global"]["mode"] == "global" and "provider" not in args["global"]
+    # The nodelet's process is the localizer's manager; the rospy provider is a process of its own.
+    assert mode_roles(cfg, "grid_puzzle") == {"localizer": "/localizer_manager", "map_provider": "/localizer_manager"}
+    assert mode_roles(cfg, "grid_puzzle_rospy") == {
+        "localizer": "/localizer_manager",
+        "map_provider": "/grid_puzzle_map_provider",
+    }
+    # Either way the runner waits for the provider's node (the nodelet's loader, or the rospy node).
+    for mode in ("grid_puzzle", "grid_puzzle_rospy"):
+        assert required_nodes(cfg, mode) == {"/localizer_manager", "/grid_puzzle_map_provider"}
+    assert required_nodes(cfg, "global") == {"/localizer_manager"}
+    assert set(EMPTY_MAP_MODES) == {"global", "grid_puzzle", "grid_puzzle_rospy"}

@@ -1,5 +1,6 @@
 """gpm experiment end to end with the real pieces: a tiny simulated courtyard (6 s of bag), the NDT
-localizer nodelet in global (its own PCD) and grid puzzle (tiles from the provider) modes."""
+localizer nodelet in global (its own PCD) and grid puzzle modes (tiles from the provider nodelet in the
+localizer's manager, and from the rospy provider, the paper's setup)."""
 
 import contextlib
 import json
@@ -18,6 +19,7 @@ from process_check import processes_on
 from grid_puzzle_localization.cli import main
 from grid_puzzle_localization.evaluation.scan_times import read_scan_times
 from grid_puzzle_localization.evaluation.trajectory import read_tum
+from grid_puzzle_localization.experiment.modes import DEFAULT_MODES
 from grid_puzzle_localization.monitor.log import read_csv
 from grid_puzzle_localization.report.build import read_json
 
@@ -40,12 +42,14 @@ def run(tmp_path_factory):
 def test_every_output_exists_and_parses(run):
     scenario, out = run
     summary = read_json(out / "summary.json")
-    assert set(summary["modes"]) == {"global", "grid_puzzle"}
+    assert list(summary["modes"]) == ["global", "grid_puzzle", "grid_puzzle_rospy"] == list(DEFAULT_MODES)
     assert "| Trajectory RMSE, grid puzzle vs global [m] |" in (out / "report.md").read_text()
     for name in ("cpu", "memory", "trajectories", "errors"):
         assert imread(out / "plots" / f"{name}.png").ndim == 3
+    # The trajectory plot draws the map the run played against under the trajectories.
+    assert read_json(out / "run.json")["global_map"] == str((scenario / "global_map.pcd").resolve())
     gt = read_tum(scenario / "ground_truth.tum")
-    for mode in ("global", "grid_puzzle"):
+    for mode in DEFAULT_MODES:
         traj = read_tum(out / mode / "trajectory.tum")
         assert len(traj) >= 40  # 10 Hz scans over 6 s, a few lost while starting
         assert gt.t[0] - 0.2 <= traj.t[0] and traj.t[-1] <= gt.t[-1] + 0.2
@@ -64,21 +68,30 @@ def test_every_output_exists_and_parses(run):
 def test_modes_agree_within_5_cm_and_track_ground_truth(run):
     _scenario, out = run
     summary = read_json(out / "summary.json")
-    between = summary["between_modes"]["grid_puzzle_vs_global"]["translation_m"]
-    assert between["rmse"] < 0.05 and between["pairs"] >= 40
-    for mode in ("global", "grid_puzzle"):
+    for mode in ("grid_puzzle", "grid_puzzle_rospy"):
+        between = summary["between_modes"][f"{mode}_vs_global"]["translation_m"]
+        assert between["rmse"] < 0.05 and between["pairs"] >= 40, mode
+    for mode in DEFAULT_MODES:
         ape = summary["modes"][mode]["ape"]["translation_m"]
         # The prior map is built with a few centimetres of drift (simulator): 0.3 m bounds a lost track.
         assert ape["max"] < 0.3, mode
-    paper = summary["modes"]["grid_puzzle"]["resources"]["paper"]
-    assert paper["processes"] == ["/localizer_manager", "/grid_puzzle_map_provider"]
-    assert np.isfinite(paper["cpu_percent"]["mean"]) and paper["rss_bytes"]["mean"] > 10e6
+    resources = {mode: summary["modes"][mode]["resources"] for mode in summary["modes"]}
+    # The provider nodelet is in the localizer's manager: that one process; the paper's setup adds the provider's.
+    assert resources["grid_puzzle"]["paper"]["processes"] == ["/localizer_manager"]
+    assert resources["grid_puzzle_rospy"]["paper"]["processes"] == ["/localizer_manager", "/grid_puzzle_map_provider"]
+    for mode in ("grid_puzzle", "grid_puzzle_rospy"):
+        paper = resources[mode]["paper"]
+        assert np.isfinite(paper["cpu_percent"]["mean"]) and paper["rss_bytes"]["mean"] > 10e6
+        # The total protocol counts every process of the stack: the localizer's and the provider's loaders too.
+        assert {"/localizer_manager", "/ndt_localizer", "/grid_puzzle_map_provider"} <= set(
+            resources[mode]["total"]["processes"]
+        )
 
 
 def test_map_memory_is_measured_against_an_empty_map(run):
     _scenario, out = run
     summary = read_json(out / "summary.json")
-    for mode in ("global", "grid_puzzle"):
+    for mode in DEFAULT_MODES:
         log = read_csv(out / mode / "empty_map" / "monitor.csv")
         assert "/localizer_manager" in log.names and len(log) >= 4
         memory = summary["modes"][mode]["map_memory"]["processes"]["/localizer_manager"]
@@ -86,8 +99,9 @@ def test_map_memory_is_measured_against_an_empty_map(run):
         assert memory["empty_map_rss_bytes_mean"] > 10e6 and memory["map_bytes"] > 0.5e6, mode
         # The empty map's localizer matched nothing: no odometry was recorded.
         assert not (out / mode / "empty_map" / "trajectory.tum").exists()
-    ratio = summary["map_memory_ratios"]["grid_puzzle"]["paper"]
-    assert ratio is not None and ratio > 0
+    for mode in ("grid_puzzle", "grid_puzzle_rospy"):
+        ratio = summary["map_memory_ratios"][mode]["paper"]
+        assert ratio is not None and ratio > 0, mode
     assert "### Map memory" in (out / "report.md").read_text()
 
 

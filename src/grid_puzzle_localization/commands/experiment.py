@@ -1,6 +1,6 @@
 """`gpm experiment`: the paper's experiment on a scenario directory (from `gpm simulate`) or on your
 own bag, map and ground truth. Writes OUT/summary.json, OUT/report.md, OUT/plots/ and one directory
-per mode, and prints the comparison table."""
+per mode, and prints the tables of the grid puzzle modes against the global map and the paper."""
 
 from __future__ import annotations
 
@@ -11,18 +11,17 @@ from pathlib import Path
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation.storage import storage_figures
 from grid_puzzle_localization.experiment.config import (
-    DEFAULT_MODES,
     FUSIONS,
-    MODES,
     PRESETS,
     ExperimentConfig,
     NodeRoles,
     WindowPreset,
 )
 from grid_puzzle_localization.experiment.maps import ensure_blocks, ensure_submaps, ensure_tiles
+from grid_puzzle_localization.experiment.modes import DEFAULT_MODES, MODES
 from grid_puzzle_localization.experiment.runner import run_experiment
 from grid_puzzle_localization.experiment.scenario import read_scenario
-from grid_puzzle_localization.report.markdown import comparison_table
+from grid_puzzle_localization.report.markdown import printed_tables
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -44,8 +43,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "submaps of side S, else cut (default OUT/submaps_L<S>)",
     )
     parser.add_argument(
-        "--modes", nargs="+", default=list(DEFAULT_MODES), choices=MODES, help="modes to run (default: %(default)s)"
-    )
+        "--modes", nargs="+", default=list(DEFAULT_MODES), choices=MODES,
+        help="modes to run: grid_puzzle has the provider nodelet in the localizer's manager, grid_puzzle_rospy the "
+        "rospy provider (the paper's setup) (default: %(default)s)",
+    )  # fmt: skip
     parser.add_argument(
         "--preset", default=ExperimentConfig.preset, choices=sorted(PRESETS),
         help="window preset n, k, s (default %(default)s)",
@@ -84,8 +85,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--max-time-diff", type=float, default=ExperimentConfig.max_time_diff_s,
         help="pose association tolerance [s] (default %(default)s)",
     )  # fmt: skip
-    parser.add_argument("--localizer-node", default=NodeRoles.localizer, help="node whose process runs the NDT")
-    parser.add_argument("--provider-node", default=NodeRoles.map_provider, help="node of the tile provider")
+    parser.add_argument(
+        "--localizer-node", default=NodeRoles.localizer,
+        help="node whose process runs the NDT (and, in grid_puzzle mode, the provider nodelet)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--provider-node", default=NodeRoles.map_provider,
+        help="node of the tile provider (grid_puzzle_rospy: its process; grid_puzzle: its nodelet's loader)",
+    )  # fmt: skip
     parser.add_argument("--block-server-node", default=NodeRoles.block_server, help="node of the block map server")
 
 
@@ -140,6 +147,6 @@ def run(args: argparse.Namespace) -> int:
         submaps = ensure_submaps(cfg.global_map, cfg.submaps or cfg.out_dir / f"submaps_L{size:g}", size)
         cfg = dataclasses.replace(cfg, blocks=blocks)
     summary = run_experiment(cfg, tiles, storage_figures(cfg.global_map, tiles, blocks, submaps))
-    print("\n".join(comparison_table(summary)))
+    print("\n".join(printed_tables(summary)))
     print(f"\nreport: {cfg.out_dir / 'report.md'}, plots: {cfg.out_dir / 'plots'}/")
     return 0

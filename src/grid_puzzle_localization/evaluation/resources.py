@@ -1,8 +1,10 @@
 """CPU and memory per mode under two accounting protocols, and reductions between modes.
 
 - ``paper``: the processes the grid puzzle paper summed: the NDT localizer alone in global-map mode,
-  the localizer plus the map provider in grid-puzzle (and block-map) mode.
-- ``total``: every process of the mode (nodelet managers, provider, helpers).
+  the localizer plus the map provider in the grid puzzle (and block-map) modes. Each process counts once:
+  with the provider nodelet (grid_puzzle mode) that is the localizer's nodelet manager alone; with the
+  rospy provider (grid_puzzle_rospy, the paper's setup) the manager plus the provider's process.
+- ``total``: every process of the mode (nodelet managers, nodelet loaders, provider, helpers).
 
 CPU is in percent of one core; memory in bytes (RSS as psutil reports it, the paper's figure; PSS
 where available, which does not double-count pages shared between the summed processes).
@@ -23,14 +25,16 @@ PROTOCOLS = ("paper", "total")
 PAPER_ROLES: dict[str, tuple[str, ...]] = {
     "global": ("localizer",),
     "grid_puzzle": ("localizer", "map_provider"),
+    "grid_puzzle_rospy": ("localizer", "map_provider"),
     "block_map": ("localizer", "map_provider"),
 }
 RESOURCE_METRICS = ("cpu_percent", "rss_bytes", "pss_bytes", "uss_bytes")
 
 
 def protocol_processes(mode: str, roles: Mapping[str, str], log: MonitorLog, protocol: str) -> list[str]:
-    """Names of the monitored processes counted under ``protocol`` for ``mode``. ``roles`` maps a
-    role (``localizer``, ``map_provider``) to the process name in the log."""
+    """Names of the monitored processes counted under ``protocol`` for ``mode``, each once. ``roles`` maps
+    a role (``localizer``, ``map_provider``) to the process name in the log; two roles may name the same
+    process (a nodelet provider in the localizer's manager)."""
     if protocol == "total":
         return list(log.names)
     if protocol != "paper":
@@ -40,7 +44,7 @@ def protocol_processes(mode: str, roles: Mapping[str, str], log: MonitorLog, pro
     missing = [r for r in PAPER_ROLES[mode] if r not in roles]
     if missing:
         raise UserError(f"mode {mode} needs the process of role(s) {missing} for the paper protocol")
-    return [roles[r] for r in PAPER_ROLES[mode]]
+    return list(dict.fromkeys(roles[r] for r in PAPER_ROLES[mode]))
 
 
 def resource_stats(log: MonitorLog, names: Sequence[str]) -> dict[str, dict]:

@@ -7,9 +7,9 @@ from pathlib import Path
 
 from grid_puzzle_localization.blocks.builder import BlockConfig
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.experiment.modes import DEFAULT_MODES, MODES
 from grid_puzzle_localization.provider.window import PRESETS as PAPER_WINDOWS
 
-MODES = ("global", "grid_puzzle", "block_map")
 FUSIONS = ("none", "sliding_window", "auto")  # the localizer's fusion/mode
 
 
@@ -35,14 +35,10 @@ PRESETS: dict[str, WindowPreset] = {
 class NodeRoles:
     """ROS node names whose processes play each role (the nodelet runs inside its manager)."""
 
-    localizer: str = "/localizer_manager"
-    map_provider: str = "/grid_puzzle_map_provider"
+    localizer: str = "/localizer_manager"  # also the provider's process in grid_puzzle mode (a nodelet)
+    map_provider: str = "/grid_puzzle_map_provider"  # grid_puzzle_rospy: its process; grid_puzzle: its loader
     block_server: str = "/block_map_server"  # the block_map mode's map provider
     recorder: str = "/trajectory_recorder"
-
-
-DEFAULT_MODES = ("global", "grid_puzzle")
-EMPTY_MAP_MODES = ("global", "grid_puzzle")  # the modes whose floor an empty-map run measures
 
 
 @dataclass
@@ -78,7 +74,7 @@ class ExperimentConfig:
             if mode not in MODES:
                 raise UserError(f"unknown mode '{mode}' (use {', '.join(MODES)})")
         if not self.modes:
-            raise UserError("give at least one mode (--modes global grid_puzzle)")
+            raise UserError(f"give at least one mode (--modes {' '.join(DEFAULT_MODES)})")
         if not self.rate > 0:
             raise UserError(f"--rate must be > 0 (got {self.rate})")
         if not self.monitor_interval_s > 0:

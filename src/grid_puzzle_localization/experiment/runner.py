@@ -17,8 +17,9 @@ from scipy.spatial.transform import Rotation
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation.trajectory import read_tum
-from grid_puzzle_localization.experiment.config import EMPTY_MAP_MODES, ExperimentConfig
+from grid_puzzle_localization.experiment.config import ExperimentConfig
 from grid_puzzle_localization.experiment.maps import write_empty_map
+from grid_puzzle_localization.experiment.modes import EMPTY_MAP_MODES, GRID_PUZZLE_MODES, LAUNCH_MODES
 from grid_puzzle_localization.experiment.processes import ManagedProcess, wait_for
 from grid_puzzle_localization.experiment.ros_stack import RosCore, rosbag_play, roslaunch, run_node
 from grid_puzzle_localization.monitor.log import write_csv
@@ -60,8 +61,9 @@ def initial_pose_from(trajectory_path: Path) -> list[float]:
 def launch_args(
     cfg: ExperimentConfig, mode: str, global_map: Path, tiles: Path | None, initial_pose: list[float]
 ) -> dict[str, object]:
+    launch = LAUNCH_MODES[mode]
     args: dict[str, object] = {
-        "mode": mode,
+        "mode": launch.mode,
         "use_sim_time": "true",
         "initial_pose": "[" + ", ".join(f"{v:.9g}" for v in initial_pose) + "]",
         "map": global_map.resolve(),
@@ -72,6 +74,8 @@ def launch_args(
         args["ndt_threads"] = cfg.ndt_threads
     if cfg.fusion is not None:  # else the localizer's own default
         args["fusion"] = cfg.fusion
+    if launch.provider is not None:
+        args["provider"] = launch.provider
     if tiles is not None:
         args["tiles"] = tiles.resolve()
     if mode == "block_map":
@@ -80,12 +84,25 @@ def launch_args(
 
 
 def mode_roles(cfg: ExperimentConfig, mode: str) -> dict[str, str]:
+    """The node whose process plays each role. The provider nodelet runs in the localizer's manager, so in
+    grid_puzzle mode that one process plays both roles."""
     roles = {"localizer": cfg.roles.localizer}
     if mode == "grid_puzzle":
+        roles["map_provider"] = cfg.roles.localizer
+    elif mode == "grid_puzzle_rospy":
         roles["map_provider"] = cfg.roles.map_provider
     elif mode == "block_map":
         roles["map_provider"] = cfg.roles.block_server
     return roles
+
+
+def required_nodes(cfg: ExperimentConfig, mode: str) -> set[str]:
+    """The nodes to wait for before playing: the role processes' and the tile provider's (in grid_puzzle
+    mode, the loader of its nodelet)."""
+    nodes = set(mode_roles(cfg, mode).values())
+    if mode in GRID_PUZZLE_MODES:
+        nodes.add(cfg.roles.map_provider)
+    return nodes
 
 
 def say(mode: str, text: str) -> None:
@@ -137,7 +154,7 @@ class ModeInputs:
     """What one run of a mode plays against, and for how long."""
 
     global_map: Path
-    tiles: Path | None  # grid_puzzle mode's tile directory
+    tiles: Path | None  # the grid puzzle modes' tile directory
     out: Path  # the run's directory (emptied first)
     duration_s: float | None = None  # seconds of the bag to play; None: all of it
     record: bool = True  # record the trajectory (and require one)
@@ -160,7 +177,7 @@ def run_mode(cfg: ExperimentConfig, mode: str, inputs: ModeInputs, initial_pose:
         args = launch_args(cfg, mode, inputs.global_map, inputs.tiles, initial_pose)
         launch = roslaunch(cfg.launch_file, args, core.env, out / "logs" / "roslaunch.log")
         started.append(launch)
-        wanted = set(roles.values())
+        wanted = required_nodes(cfg, mode)
         wait_for(lambda: wanted <= core.nodes(), cfg.startup_timeout_s, f"the nodes {sorted(wanted)}", launch)
         wait_for(lambda: core.subscribers("/points"), cfg.startup_timeout_s, "a subscriber of /points", launch)
         if inputs.record:
@@ -208,7 +225,7 @@ def run_experiment(cfg: ExperimentConfig, tiles: Path | None, storage: dict | No
     initial_pose = cfg.initial_pose if cfg.initial_pose is not None else initial_pose_from(cfg.ground_truth)
     outcomes = []
     for mode in cfg.modes:
-        inputs = ModeInputs(cfg.global_map, tiles if mode == "grid_puzzle" else None, cfg.out_dir / mode)
+        inputs = ModeInputs(cfg.global_map, tiles if mode in GRID_PUZZLE_MODES else None, cfg.out_dir / mode)
         outcomes.append(run_mode(cfg, mode, inputs, initial_pose))
         if cfg.empty_map_s > 0 and mode in EMPTY_MAP_MODES:
             outcomes.append(run_empty_map(cfg, mode, initial_pose))
@@ -229,6 +246,7 @@ def run_experiment(cfg: ExperimentConfig, tiles: Path | None, storage: dict | No
         modes=list(cfg.modes),
         roles={o.mode: o.roles for o in outcomes},
         ground_truth=str(cfg.ground_truth.resolve()) if cfg.ground_truth else None,
+        global_map=str(cfg.global_map.resolve()),
         storage=storage,
         max_diff_s=cfg.max_time_diff_s,
         extra={"outcomes": [asdict(o) for o in outcomes], "initial_pose": list(np.asarray(initial_pose, float))},

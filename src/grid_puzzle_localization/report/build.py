@@ -1,6 +1,6 @@
 """Builds summary.json, report.md and plots/ from an experiment directory:
 
-OUT/run.json                    scenario, modes, roles per mode, ground truth path, storage figures
+OUT/run.json                    scenario, modes, roles per mode, ground truth and map paths, storage figures
 OUT/<mode>/trajectory.tum       the localizer's odometry (TUM)
 OUT/<mode>/monitor.csv, .json   the resource monitor's samples and summary (with events)
 OUT/<mode>/scan_times.csv       the localizer's per-scan times (optional)
@@ -21,6 +21,7 @@ from grid_puzzle_localization.evaluation.summary import ModeRun, summarize_exper
 from grid_puzzle_localization.evaluation.trajectory import read_tum
 from grid_puzzle_localization.monitor.log import Event, read_csv
 from grid_puzzle_localization.report import plots
+from grid_puzzle_localization.report.map_view import map_top_view
 from grid_puzzle_localization.report.markdown import render_report
 from grid_puzzle_localization.util.atomic import atomic_write
 
@@ -40,6 +41,7 @@ class RunInfo:
     modes: list[str]
     roles: dict[str, dict[str, str]]  # mode -> role -> monitored process name
     ground_truth: str | None = None
+    global_map: str | None = None  # the map PCD the trajectory plot draws under the trajectories
     storage: dict | None = None
     max_diff_s: float = 0.05
     extra: dict = field(default_factory=dict)
@@ -102,6 +104,8 @@ def build_report(out_dir: str | os.PathLike) -> dict:
     trajectories = {r.mode: r.trajectory for r in runs}
     plots.plot_cpu(out / "plots" / "cpu.png", logs, processes)
     plots.plot_memory(out / "plots" / "memory.png", logs, processes)
-    plots.plot_trajectories(out / "plots" / "trajectories.png", trajectories, gt)
+    # The map may be gone when a report is rebuilt elsewhere: the trajectories are then drawn alone.
+    map_xy = map_top_view(info.global_map) if info.global_map and Path(info.global_map).is_file() else None
+    plots.plot_trajectories(out / "plots" / "trajectories.png", trajectories, gt, map_xy)
     plots.plot_errors(out / "plots" / "errors.png", trajectories, gt, info.max_diff_s)
     return summary

@@ -4,95 +4,82 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-MIB = 1024.0 * 1024.0
-MODE_TITLES = {"global": "global map", "grid_puzzle": "grid puzzle", "block_map": "block map"}
+from grid_puzzle_localization.experiment.modes import GRID_PUZZLE_MODES
+from grid_puzzle_localization.report.format import MIB, change, mib, mode_title, num, times
+from grid_puzzle_localization.report.headline import headline_section
+
 PLOTS = {
     "cpu.png": "CPU over time per mode (100 % = one core)",
     "memory.png": "Memory (RSS) over time per mode",
-    "trajectories.png": "Top-down trajectories with ground truth",
+    "trajectories.png": "Top-down trajectories over the map, with ground truth",
     "errors.png": "Position error over time",
 }
-
-
-def _num(value: float | None, fmt: str = ".1f", suffix: str = "") -> str:
-    return "–" if value is None else f"{value:{fmt}}{suffix}"
-
-
-def _mib(value: float | None) -> str:
-    return _num(None if value is None else value / MIB, ".1f")
-
-
-def _change(change: Mapping | None, scale: float = 1.0, unit: str = "") -> str:
-    if not change or change.get("absolute") is None:
-        return "–"
-    rel = change.get("relative_percent")
-    rel_text = "" if rel is None else f" ({rel:+.1f} %)"
-    return f"{change['absolute'] / scale:+.1f}{unit}{rel_text}"
 
 
 def _paper_change(before: float, after: float, unit: str) -> str:
     return f"{after - before:+.1f}{unit} ({100 * (after - before) / before:+.1f} %)"
 
 
-def comparison_table(summary: Mapping, mode: str = "grid_puzzle") -> list[str]:
-    """Our figures (paper protocol, means) next to the paper's two datasets."""
+def comparison_table(summary: Mapping) -> list[str]:
+    """Our figures (paper protocol, means), one column per grid puzzle mode run (the provider nodelet first,
+    then the paper's setup), next to the paper's two datasets."""
     paper = summary["paper"]
     modes = summary["modes"]
-    ours_base = modes.get("global", {}).get("resources", {}).get("paper", {})
-    ours_mode = modes.get(mode, {}).get("resources", {}).get("paper", {})
-    change = summary.get("reductions", {}).get(mode, {}).get("paper", {})
-    between = summary.get("between_modes", {}).get(f"{mode}_vs_global")
+    ours_modes = [m for m in GRID_PUZZLE_MODES if m in modes] or [GRID_PUZZLE_MODES[0]]
+    base = modes.get("global", {}).get("resources", {}).get("paper", {})
     storage = summary.get("storage") or {}
     tiles = storage.get("tiles") or {}
     global_map = storage.get("global_map") or {}
+    c, u = paper["courtyard"], paper["urban"]
 
-    def ours(section: Mapping, metric: str) -> float | None:
+    def mean(section: Mapping, metric: str) -> float | None:
         return (section.get(metric) or {}).get("mean")
 
-    c, u = paper["courtyard"], paper["urban"]
+    def mode_paper(mode: str) -> Mapping:
+        return modes.get(mode, {}).get("resources", {}).get("paper", {})
+
+    def reduction(mode: str, metric: str) -> Mapping | None:
+        return summary.get("reductions", {}).get(mode, {}).get("paper", {}).get(metric, {}).get("mean")
+
+    def rmse(mode: str) -> float | None:
+        between = summary.get("between_modes", {}).get(f"{mode}_vs_global")
+        return between["translation_m"]["rmse"] if between else None
+
+    def row(figure: str, ours: list[str], courtyard: str, urban: str) -> str:
+        return f"| {figure} | {' | '.join(ours)} | {courtyard} | {urban} |"
+
+    def same(text: str) -> list[str]:
+        return [text] * len(ours_modes)
+
+    cpu, mem = c["cpu_percent_mean"], c["memory_mb_mean"]
+    ucpu, umem = u["cpu_percent_mean"], u["memory_mb_mean"]
     lines = [
-        "| figure (means; paper protocol) | ours | paper courtyard | paper urban |",
-        "|---|---:|---:|---:|",
-    ]
-    for m, title in (("global", "global map"), ("grid_puzzle", "grid puzzle")):
-        value = ours(ours_base if m == "global" else ours_mode, "cpu_percent")
-        lines.append(
-            f"| CPU, {title} [% of one core] | {_num(value)} "
-            f"| {c['cpu_percent_mean'][m]:.1f} | {u['cpu_percent_mean'][m]:.1f} |"
-        )
-    lines.append(
-        f"| CPU change | {_change((change or {}).get('cpu_percent', {}).get('mean'), unit=' pts')} | "
-        f"{_paper_change(c['cpu_percent_mean']['global'], c['cpu_percent_mean']['grid_puzzle'], ' pts')} | "
-        f"{_paper_change(u['cpu_percent_mean']['global'], u['cpu_percent_mean']['grid_puzzle'], ' pts')} |"
-    )
-    lines.append(
-        f"| Memory, global map [MiB ours RSS; MB paper] | {_mib(ours(ours_base, 'rss_bytes'))} | "
-        f"{c['memory_mb_mean']['global']:.1f} | {u['memory_mb_mean']['global']:.1f} |"
-    )
-    lines.append(
-        f"| Memory, grid puzzle [MiB ours RSS; MB paper] | {_mib(ours(ours_mode, 'rss_bytes'))} | "
-        f"{c['memory_mb_mean']['grid_puzzle']:.1f} | {u['memory_mb_mean']['grid_puzzle']:.1f} |"
-    )
-    lines.append(
-        f"| Memory change | {_change((change or {}).get('rss_bytes', {}).get('mean'), MIB, ' MiB')} | "
-        f"{_paper_change(c['memory_mb_mean']['global'], c['memory_mb_mean']['grid_puzzle'], ' MB')} | "
-        f"{_paper_change(u['memory_mb_mean']['global'], u['memory_mb_mean']['grid_puzzle'], ' MB')} |"
-    )
-    rmse = between["translation_m"]["rmse"] if between else None
-    lines.append(
-        f"| Trajectory RMSE, grid puzzle vs global [m] | {_num(rmse, '.4f')} | "
-        f"{c['rmse_between_modes_m']:.4f} | {u['rmse_between_modes_m']:.4f} |"
-    )
-    lines.append(
-        f"| Storage overhead (tile data bytes minus map data bytes) "
-        f"| {_num(tiles.get('data_overhead_bytes'), ',.0f')} | "
-        f"{c['storage_overhead_bytes']} | {u['storage_overhead_bytes']} |"
-    )
-    lines.append(f"| Tile files | {_num(tiles.get('files'), ',.0f')} | {c['tile_files']:,} | {u['tile_files']:,} |")
-    lines.append(
-        f"| Global map size [MB] | {_num(None if not global_map else global_map['bytes'] / 1e6, ',.1f')} | "
-        f"{c['global_map_mb']:,.1f} | {u['global_map_mb']:,.1f} |"
-    )
+        row("figure (means; paper protocol)", [f"ours: {mode_title(m)}" for m in ours_modes], "paper courtyard",
+            "paper urban"),
+        "|---|" + "---:|" * (len(ours_modes) + 2),
+        row("CPU, global map [% of one core]", same(num(mean(base, "cpu_percent"))), f"{cpu['global']:.1f}",
+            f"{ucpu['global']:.1f}"),
+        row("CPU, grid puzzle [% of one core]", [num(mean(mode_paper(m), "cpu_percent")) for m in ours_modes],
+            f"{cpu['grid_puzzle']:.1f}", f"{ucpu['grid_puzzle']:.1f}"),
+        row("CPU change", [change(reduction(m, "cpu_percent"), unit=" pts") for m in ours_modes],
+            _paper_change(cpu["global"], cpu["grid_puzzle"], " pts"),
+            _paper_change(ucpu["global"], ucpu["grid_puzzle"], " pts")),
+        row("Memory, global map [MiB ours RSS; MB paper]", same(mib(mean(base, "rss_bytes"))), f"{mem['global']:.1f}",
+            f"{umem['global']:.1f}"),
+        row("Memory, grid puzzle [MiB ours RSS; MB paper]", [mib(mean(mode_paper(m), "rss_bytes")) for m in ours_modes],
+            f"{mem['grid_puzzle']:.1f}", f"{umem['grid_puzzle']:.1f}"),
+        row("Memory change", [change(reduction(m, "rss_bytes"), MIB, " MiB") for m in ours_modes],
+            _paper_change(mem["global"], mem["grid_puzzle"], " MB"),
+            _paper_change(umem["global"], umem["grid_puzzle"], " MB")),
+        row("Trajectory RMSE, grid puzzle vs global [m]", [num(rmse(m), ".4f") for m in ours_modes],
+            f"{c['rmse_between_modes_m']:.4f}", f"{u['rmse_between_modes_m']:.4f}"),
+        row("Storage overhead (tile data bytes minus map data bytes)",
+            same(num(tiles.get("data_overhead_bytes"), ",.0f")), str(c["storage_overhead_bytes"]),
+            str(u["storage_overhead_bytes"])),
+        row("Tile files", same(num(tiles.get("files"), ",.0f")), f"{c['tile_files']:,}", f"{u['tile_files']:,}"),
+        row("Global map size [MB]", same(num(None if not global_map else global_map["bytes"] / 1e6, ",.1f")),
+            f"{c['global_map_mb']:,.1f}", f"{u['global_map_mb']:,.1f}"),
+    ]  # fmt: skip
     return lines
 
 
@@ -105,10 +92,10 @@ def resources_table(summary: Mapping) -> list[str]:
     for mode, m in summary["modes"].items():
         for protocol, r in m["resources"].items():
             lines.append(
-                f"| {MODE_TITLES.get(mode, mode)} | {protocol} | {', '.join(r['processes'])} "
-                f"| {_num(r['cpu_percent']['mean'])} | {_num(r['cpu_percent']['p95'])} "
-                f"| {_mib(r['rss_bytes']['mean'])} | {_mib(r['rss_bytes']['p95'])} "
-                f"| {_mib(r['pss_bytes']['mean'])} | {_mib(r['pss_bytes']['p95'])} |"
+                f"| {mode_title(mode)} | {protocol} | {', '.join(r['processes'])} "
+                f"| {num(r['cpu_percent']['mean'])} | {num(r['cpu_percent']['p95'])} "
+                f"| {mib(r['rss_bytes']['mean'])} | {mib(r['rss_bytes']['p95'])} "
+                f"| {mib(r['pss_bytes']['mean'])} | {mib(r['pss_bytes']['p95'])} |"
             )
     return lines
 
@@ -120,9 +107,9 @@ def reductions_table(summary: Mapping) -> list[str]:
     ]
     for mode, by_protocol in summary.get("reductions", {}).items():
         for protocol, r in by_protocol.items():
-            cells = [_change(r["cpu_percent"][s], unit=" pts") for s in ("mean", "p95")]
-            cells += [_change(r[m][s], MIB, " MiB") for m in ("rss_bytes", "pss_bytes") for s in ("mean", "p95")]
-            lines.append(f"| {MODE_TITLES.get(mode, mode)} | {protocol} | " + " | ".join(cells) + " |")
+            cells = [change(r["cpu_percent"][s], unit=" pts") for s in ("mean", "p95")]
+            cells += [change(r[m][s], MIB, " MiB") for m in ("rss_bytes", "pss_bytes") for s in ("mean", "p95")]
+            lines.append(f"| {mode_title(mode)} | {protocol} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -138,17 +125,16 @@ def map_memory_table(summary: Mapping) -> list[str]:
         memory = m.get("map_memory")
         if memory is None:
             continue
-        title = MODE_TITLES.get(mode, mode)
+        title = mode_title(mode)
         for name, p in memory["processes"].items():
             lines.append(
-                f"| {title} | {name} | {_mib(p['rss_bytes_mean'])} | {_mib(p['empty_map_rss_bytes_mean'])} "
-                f"| {_mib(p['map_bytes'])} | |"
+                f"| {title} | {name} | {mib(p['rss_bytes_mean'])} | {mib(p['empty_map_rss_bytes_mean'])} "
+                f"| {mib(p['map_bytes'])} | |"
             )
         for protocol in ("paper", "total"):
             ratio = 1.0 if mode == summary["baseline_mode"] else ratios.get(mode, {}).get(protocol)
             lines.append(
-                f"| {title} | {protocol} protocol | | | {_mib(memory[protocol]['map_bytes'])} "
-                f"| {_num(ratio, '.2f', ' x')} |"
+                f"| {title} | {protocol} protocol | | | {mib(memory[protocol]['map_bytes'])} | {times(ratio)} |"
             )
     return lines if len(lines) > 2 else []
 
@@ -159,10 +145,8 @@ def accuracy_table(summary: Mapping) -> list[str]:
         "| rot. RMSE [deg] | rot. median [deg] | rot. max [deg] |",
         "|---|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
-    entries = [(MODE_TITLES.get(mode, mode), "ground truth", m["ape"]) for mode, m in summary["modes"].items()]
-    entries += [
-        (MODE_TITLES.get(key.split("_vs_")[0], key), "global map run", e) for key, e in summary["between_modes"].items()
-    ]
+    entries = [(mode_title(mode), "ground truth", m["ape"]) for mode, m in summary["modes"].items()]
+    entries += [(mode_title(key.split("_vs_")[0]), "global map run", e) for key, e in summary["between_modes"].items()]
     for name, ref, e in entries:
         if e is None:
             lines.append(f"| {name} | {ref} | – | – | – | – | – | – | – |")
@@ -188,8 +172,8 @@ def scan_time_table(summary: Mapping) -> list[str]:
     for mode, t in rows:
         if t:
             lines.append(
-                f"| {MODE_TITLES.get(mode, mode)} | {fusion} | {t['scans']} | {_num(t['mean'])} "
-                f"| {_num(t['median'])} | {_num(t['p95'])} |"
+                f"| {mode_title(mode)} | {fusion} | {t['scans']} | {num(t['mean'])} "
+                f"| {num(t['median'])} | {num(t['p95'])} |"
             )
     return lines
 
@@ -231,7 +215,7 @@ def map_memory_section(summary: Mapping) -> list[str]:
     if not table:
         return []
     return [
-        "### Map memory",
+        "### Map memory per process",
         "",
         *table,
         "",
@@ -239,6 +223,12 @@ def map_memory_section(summary: Mapping) -> list[str]:
         "bag against an empty map (its floor: libraries, ROS, scan buffers).",
         "",
     ]
+
+
+def printed_tables(summary: Mapping) -> list[str]:
+    """What `gpm experiment` and `gpm report` print: the grid puzzle modes against the global map, then our
+    figures next to the paper's."""
+    return [*headline_section(summary), *comparison_table(summary)]
 
 
 def render_report(summary: Mapping) -> str:
@@ -250,20 +240,24 @@ def render_report(summary: Mapping) -> str:
         "",
         f"Setting: {setting}.",
         "",
+        "## Grid puzzle against the global map",
+        "",
+        *headline_section(summary),
         "## Our figures next to the paper's",
         "",
         *comparison_table(summary),
         "",
-        "The paper protocol counts the NDT localizer process alone in global-map mode and the localizer plus the",
-        "map provider in grid-puzzle mode, as the paper did. CPU is in percent of one core (200 % = two cores",
+        "Paper protocol, as the paper summed: the NDT localizer's process alone in global-map mode, plus the map",
+        "provider's process when it has one (the paper's setup). CPU is in percent of one core (200 % = two cores",
         'busy); "pts" are percentage points. Our memory is psutil\'s RSS in MiB; the paper printed MB.',
         "",
         "## CPU and memory per mode",
         "",
         *resources_table(summary),
         "",
-        "The total protocol counts every process of the mode's launch file. PSS splits shared pages between",
-        "the processes that share them, so it does not double-count libraries when processes are summed.",
+        "The total protocol counts every process of the mode's launch (nodelet loaders included). PSS splits",
+        "shared pages between the processes that share them, so it does not double-count libraries when",
+        "processes are summed.",
         "",
         "### Change against the global map",
         "",

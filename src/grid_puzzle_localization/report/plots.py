@@ -6,27 +6,25 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping, Sequence
 
+import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from grid_puzzle_localization.evaluation.metrics import interpolated_errors, paired_errors
 from grid_puzzle_localization.evaluation.trajectory import Trajectory
 from grid_puzzle_localization.monitor.log import MonitorLog
-from grid_puzzle_localization.report.markdown import MIB, MODE_TITLES
+from grid_puzzle_localization.report.format import MIB, mode_title
 from grid_puzzle_localization.util.atomic import atomic_write
 from grid_puzzle_localization.util.iteration import zip_equal
 
-COLORS = {"global": "tab:blue", "grid_puzzle": "tab:orange", "block_map": "tab:green"}
+COLORS = {"global": "tab:blue", "grid_puzzle": "tab:orange", "grid_puzzle_rospy": "tab:red", "block_map": "tab:green"}
+MAP_COLOR = "0.82"  # light grey: the map stays under the trajectories
 
 
 def _save(fig: Figure, path: str | os.PathLike) -> None:
     FigureCanvasAgg(fig)
     with atomic_write(path, "wb") as f:
         fig.savefig(f, format="png", dpi=110)
-
-
-def _title(mode: str) -> str:
-    return MODE_TITLES.get(mode, mode)
 
 
 def plot_resource(
@@ -45,7 +43,7 @@ def plot_resource(
     for ax, protocol in zip_equal(axes, protocols):
         for mode, log in logs.items():
             values = log.sum(metric, list(processes[mode][protocol])) / scale
-            ax.plot(log.t_s, values, color=COLORS.get(mode), label=_title(mode), lw=1.2)
+            ax.plot(log.t_s, values, color=COLORS.get(mode), label=mode_title(mode), lw=1.2)
         ax.set_title(f"{protocol} protocol")
         ax.set_xlabel("time since monitoring started [s]")
         ax.set_ylabel(ylabel)
@@ -62,22 +60,34 @@ def plot_memory(path, logs, processes) -> None:
     plot_resource(path, logs, processes, "rss_bytes", "RSS [MiB]", MIB)
 
 
-def plot_trajectories(
-    path: str | os.PathLike, trajectories: Mapping[str, Trajectory], ground_truth: Trajectory | None
-) -> None:
-    """Top-down (x, y) view of every mode's trajectory over the ground truth."""
+def trajectory_figure(
+    trajectories: Mapping[str, Trajectory], ground_truth: Trajectory | None, map_xy: np.ndarray | None = None
+) -> Figure:
+    """Top-down (x, y) view of every mode's trajectory over the ground truth, over the map's points
+    (``map_xy``, (N, 2) [m], e.g. report.map_view.map_top_view) when given."""
     fig = Figure(figsize=(7, 7), layout="constrained")
     ax = fig.subplots()
+    if map_xy is not None and len(map_xy):
+        ax.scatter(map_xy[:, 0], map_xy[:, 1], s=0.3, c=MAP_COLOR, linewidths=0, rasterized=True, label="map")
     if ground_truth is not None:
         ax.plot(ground_truth.xyz[:, 0], ground_truth.xyz[:, 1], color="black", lw=3, alpha=0.35, label="ground truth")
     for mode, traj in trajectories.items():
-        ax.plot(traj.xyz[:, 0], traj.xyz[:, 1], color=COLORS.get(mode), lw=1.0, label=_title(mode))
+        ax.plot(traj.xyz[:, 0], traj.xyz[:, 1], color=COLORS.get(mode), lw=1.0, label=mode_title(mode))
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.grid(alpha=0.3)
-    ax.legend(loc="best")
-    _save(fig, path)
+    ax.legend(loc="best", markerscale=10)  # the map's dots visible in the legend
+    return fig
+
+
+def plot_trajectories(
+    path: str | os.PathLike,
+    trajectories: Mapping[str, Trajectory],
+    ground_truth: Trajectory | None,
+    map_xy: np.ndarray | None = None,
+) -> None:
+    _save(trajectory_figure(trajectories, ground_truth, map_xy), path)
 
 
 def plot_errors(
@@ -101,8 +111,8 @@ def plot_errors(
             if panel == baseline and mode == baseline:
                 continue
             e = (interpolated_errors if panel == "ground truth" else paired_errors)(reference, traj, max_diff_s)
-            ax.plot(e.t - t0, e.translation_m, color=COLORS.get(mode), lw=1.0, label=_title(mode))
-        ax.set_title(f"position error against {'the ' + _title(baseline) + ' run' if panel == baseline else panel}")
+            ax.plot(e.t - t0, e.translation_m, color=COLORS.get(mode), lw=1.0, label=mode_title(mode))
+        ax.set_title(f"position error against {'the ' + mode_title(baseline) + ' run' if panel == baseline else panel}")
         ax.set_xlabel("time since the first pose [s]")
         ax.set_ylabel("error [m]")
         ax.set_ylim(bottom=0.0)

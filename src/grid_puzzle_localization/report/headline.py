@@ -1,0 +1,87 @@
+"""The report's first section: the grid puzzle modes against the global map, CPU and memory under both
+protocols and the map memory per process. What a user gets (the provider nodelet, grid_puzzle) comes
+first, then the paper's setup (the rospy provider, grid_puzzle_rospy)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from grid_puzzle_localization.evaluation.resources import PROTOCOLS
+from grid_puzzle_localization.experiment.modes import GRID_PUZZLE_MODES
+from grid_puzzle_localization.report.format import mib, mode_title, num, ratio, times
+
+
+def headline_modes(summary: Mapping) -> list[str]:
+    """The baseline and the grid puzzle modes that the summary holds, in that order."""
+    return [m for m in (summary["baseline_mode"], *GRID_PUZZLE_MODES) if m in summary["modes"]]
+
+
+def resources_vs_global_table(summary: Mapping) -> list[str]:
+    """Per protocol and mode: mean CPU and mean RSS, each with its ratio to the baseline's."""
+    modes = summary["modes"]
+    base = modes.get(summary["baseline_mode"], {}).get("resources", {})
+    lines = [
+        "| protocol | mode | processes | CPU mean [% of one core] | vs global | RSS mean [MiB] | vs global |",
+        "|---|---|---|---:|---:|---:|---:|",
+    ]
+    for protocol in PROTOCOLS:
+        for mode in headline_modes(summary):
+            r = modes[mode]["resources"][protocol]
+            b = base.get(protocol)
+            cpu, rss = r["cpu_percent"]["mean"], r["rss_bytes"]["mean"]
+            cpu_ratio = ratio(cpu, b["cpu_percent"]["mean"]) if b else None
+            rss_ratio = ratio(rss, b["rss_bytes"]["mean"]) if b else None
+            lines.append(
+                f"| {protocol} | {mode_title(mode)} | {', '.join(r['processes'])} | {num(cpu)} | {times(cpu_ratio)} "
+                f"| {mib(rss)} | {times(rss_ratio)} |"
+            )
+    return lines
+
+
+def map_memory_split_table(summary: Mapping) -> list[str]:
+    """Per mode: the map memory of the localizer's nodelet manager (which also holds the provider nodelet in
+    grid_puzzle mode) and of a provider process of its own (the paper's setup), then each protocol's sum and
+    its ratio to the baseline's. Empty when no empty-map run was made."""
+    ratios = summary.get("map_memory_ratios", {})
+    lines = [
+        "| mode | localizer's nodelet manager [MiB] | provider process [MiB] | paper protocol [MiB] | vs global "
+        "| total protocol [MiB] | vs global |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for mode in headline_modes(summary):
+        m = summary["modes"][mode]
+        memory = m.get("map_memory")
+        if memory is None:
+            continue
+        manager = m["roles"]["localizer"]
+        provider = m["roles"].get("map_provider", manager)
+        cells = [mib(memory["processes"].get(manager, {}).get("map_bytes"))]
+        cells.append("–" if provider == manager else mib(memory["processes"].get(provider, {}).get("map_bytes")))
+        for protocol in PROTOCOLS:
+            r = 1.0 if mode == summary["baseline_mode"] else ratios.get(mode, {}).get(protocol)
+            cells += [mib(memory[protocol]["map_bytes"]), times(r)]
+        lines.append(f"| {mode_title(mode)} | " + " | ".join(cells) + " |")
+    return lines if len(lines) > 2 else []
+
+
+def headline_section(summary: Mapping) -> list[str]:
+    """Both tables with what they count (markdown lines)."""
+    lines = [
+        *resources_vs_global_table(summary),
+        "",
+        "The paper protocol counts the NDT localizer's nodelet manager alone in global-map mode, and the processes",
+        "that localize and serve the tiles in the grid puzzle modes: the same manager alone with the provider",
+        "nodelet (grid puzzle), the manager plus the rospy provider in the paper's setup. The total protocol counts",
+        "every process of the stack (nodelet loaders included). CPU is in percent of one core; memory is RSS.",
+        "",
+    ]
+    split = map_memory_split_table(summary)
+    if split:
+        lines += [
+            *split,
+            "",
+            "Map memory: a process's mean RSS minus its mean RSS when the same launch plays the start of the bag",
+            "against an empty map. With the provider nodelet, the provider's map memory is in the manager's column.",
+            "",
+        ]
+    return lines
