@@ -8,6 +8,9 @@
 // the latched `~status`. A new subscriber first receives a reset delta of the whole window at the current revision;
 // `~resend` (std_srvs/Trigger) broadcasts one. A tile directory rewritten under the running nodelet (a new index
 // revision) is reopened and the whole window sent again as a reset; one that cannot be opened is retried.
+// The newest pose is kept on the parameter server (~last_pose, save_pose_rate): killed with its manager (and the
+// localizer in it) and respawned, the nodelet serves the window there until a pose arrives, so the respawned
+// localizer has the map its global search around its own saved pose needs.
 #include <geometry_msgs/PoseWithCovarianceStamped.h>
 #include <nav_msgs/Odometry.h>
 #include <nodelet/nodelet.h>
@@ -30,6 +33,7 @@
 #include "provider_map_cloud.hpp"
 #include "provider_msgs.hpp"
 #include "provider_params.hpp"
+#include "saved_pose.hpp"
 
 namespace grid_puzzle_localization {
 
@@ -75,6 +79,16 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
     }
     if (config_.lost_max_half_side > 0.0)
       status_sub_ = nh.subscribe("localizer_status", 1, &GridPuzzleProviderNodelet::onLocalizerStatus, this);
+    saved_pose_ = std::make_unique<SavedPoseWriter>(nh, pnh, config_.save_pose_rate);
+    if (const std::optional<XyzRpy> saved = readSavedPose(pnh, getName())) {
+      NODELET_INFO("%s: serves the window around (%.2f, %.2f), the pose saved in ~last_pose, until a pose arrives",
+                   getName().c_str(), (*saved)(0), (*saved)(1));
+      PoseSample resume;
+      resume.x = (*saved)(0);
+      resume.y = (*saved)(1);
+      resume.yaw = (*saved)(5);
+      latest_ = resume;
+    }
     worker_ = std::thread(&GridPuzzleProviderNodelet::run, this);
   }
 
@@ -159,6 +173,8 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
       followDirectory();
       if (search) coverSearch(*search);
       if (pose) {
+        if (config_.save_pose_rate > 0.0)
+          saved_pose_->set((XyzRpy() << pose->x, pose->y, 0.0, 0.0, 0.0, pose->yaw.value_or(0.0)).finished(), pose->t);
         const auto start = std::chrono::steady_clock::now();
         std::optional<Served> served;
         {
@@ -326,6 +342,7 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
   std::thread worker_;
 
   std::unique_ptr<ProviderMapCloud> map_cloud_;
+  std::unique_ptr<SavedPoseWriter> saved_pose_;  // ~last_pose
   ros::Publisher delta_pub_, status_pub_;
   ros::Subscriber pose_sub_, initial_pose_sub_, status_sub_;
   ros::ServiceServer resend_srv_;

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "grid_puzzle_localization/rpy.hpp"
+#include "saved_pose.hpp"
 
 namespace grid_puzzle_localization {
 namespace {
@@ -208,16 +209,7 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
   pnh.getParam("save_pose_rate", p.save_pose_rate);
   if (!(p.save_pose_rate >= 0.0 && std::isfinite(p.save_pose_rate)))
     throw std::invalid_argument("~save_pose_rate must be >= 0 Hz, 0 = off (got " + text(p.save_pose_rate) + ")");
-  std::vector<double> saved;
-  if (pnh.getParam("last_pose/pose", saved)) {
-    bool finite = saved.size() == 6;
-    for (double v : saved) finite = finite && std::isfinite(v);
-    if (finite)
-      p.last_pose = poseFromXyzRpy(XyzRpy(saved.data()));
-    else
-      ROS_WARN("%s: parameter ~last_pose/pose = %s is not 6 finite numbers [x y z roll pitch yaw] (m, rad); ignored",
-               log_name.c_str(), text(saved).c_str());
-  }
+  if (const std::optional<XyzRpy> saved = readSavedPose(pnh, log_name)) p.last_pose = poseFromXyzRpy(*saved);
 
   GlobalLocalizationParams& g = p.global_localization;
   pnh.getParam("global_localization/auto_start_timeout", g.auto_start_timeout);

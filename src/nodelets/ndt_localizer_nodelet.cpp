@@ -33,6 +33,7 @@
 #include "ndt_status_msg.hpp"
 #include "odometry_msg.hpp"
 #include "point_cloud_msg.hpp"
+#include "saved_pose.hpp"
 #include "tile_delta_input.hpp"
 #include "warning_throttle.hpp"
 
@@ -101,9 +102,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     hint_sub_ = nh.subscribe("initialpose_hint", 1, &NdtLocalizerNodelet::onHint, this);
     global_srv_ = pnh.advertiseService("global_localize", &NdtLocalizerNodelet::onGlobalLocalize, this);
     // The parameter server is an XML-RPC call away: the pose is written from the multi-threaded queue.
-    if (params_.save_pose_rate > 0.0)
-      save_pose_timer_ = mt_nh.createWallTimer(ros::WallDuration(1.0 / params_.save_pose_rate),
-                                               &NdtLocalizerNodelet::onSavePoseTimer, this);
+    saved_pose_ = std::make_unique<SavedPoseWriter>(mt_nh, pnh, params_.save_pose_rate);
     NODELET_INFO("%s: map source '%s', frames %s -> %s, resolution %.2f m, search %s, fusion %s", getName().c_str(),
                  params_.map_source.c_str(), params_.map_frame.c_str(), params_.base_frame.c_str(),
                  params_.core.ndt.resolution, toString(params_.core.ndt.search), toString(params_.core.fusion.mode));
@@ -268,25 +267,6 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     if (xy.allFinite()) hint_ = xy;
   }
 
-  // --------------------------------------------------------------- saved pose (multi-threaded queue)
-  // Writes the newest published pose as ~last_pose {pose: [x y z roll pitch yaw] (m, rad), stamp (s)}: one
-  // setParam call, so a reader never sees a pose with another pose's stamp. Nothing new published: no call.
-  void onSavePoseTimer(const ros::WallTimerEvent&) {
-    PoseToSave pose;
-    {
-      std::lock_guard<std::mutex> lock(pose_to_save_mutex_);
-      if (pose_to_save_.seq == saved_seq_) return;
-      pose = pose_to_save_;
-      saved_seq_ = pose.seq;
-    }
-    XmlRpc::XmlRpcValue value, xyz_rpy;
-    xyz_rpy.setSize(6);
-    for (int i = 0; i < 6; ++i) xyz_rpy[i] = pose.xyz_rpy(i);
-    value["pose"] = xyz_rpy;
-    value["stamp"] = pose.stamp;
-    getPrivateNodeHandle().setParam("last_pose", value);
-  }
-
   // The search region of a request: see srv/GlobalLocalize.srv.
   bool onGlobalLocalize(GlobalLocalize::Request& req, GlobalLocalize::Response& res) {
     const GlobalLocalizationParams& g = params_.global_localization;
@@ -365,11 +345,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     if (!out.publish) return;  // lost for longer than lost/max_coast_time: no pose rather than a wrong one
     odom_pub_.publish(toOdometryMsg(out, scan_header.stamp, params_.map_frame, params_.base_frame));
     if (params_.publish_tf) map_tf_->send(out.pose, scan_header.stamp);
-    if (params_.save_pose_rate > 0.0) {
-      const XyzRpy xyz_rpy = xyzRpyFromPose(out.pose);
-      std::lock_guard<std::mutex> lock(pose_to_save_mutex_);
-      pose_to_save_ = PoseToSave{xyz_rpy, scan_header.stamp.toSec(), pose_to_save_.seq + 1};
-    }
+    if (params_.save_pose_rate > 0.0) saved_pose_->set(xyzRpyFromPose(out.pose), scan_header.stamp.toSec());
 
     if (params_.publish_aligned_points && aligned_pub_.getNumSubscribers() > 0) {
       std_msgs::Header h = scan_header;
@@ -393,15 +369,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   std::optional<Eigen::Vector2d> hint_;  // last initialpose_hint, else the saved ~last_pose (map frame)
   LatestScanSlot<sensor_msgs::PointCloud2::ConstPtr> scan_slot_;  // points (MT queue) -> scan thread
   std::uint64_t warned_drops_ = 0;                                // scan thread only
-  struct PoseToSave {
-    XyzRpy xyz_rpy = XyzRpy::Zero();  // [m, rad] map_T_base as published
-    double stamp = 0.0;               // [s] the scan's
-    std::uint64_t seq = 0;            // poses published so far
-  };
-  std::mutex pose_to_save_mutex_;  // guards pose_to_save_ (scan thread) and saved_seq_ (save timer)
-  PoseToSave pose_to_save_;
-  std::uint64_t saved_seq_ = 0;  // pose_to_save_.seq last written to ~last_pose
-  ros::WallTimer save_pose_timer_;
+  std::unique_ptr<SavedPoseWriter> saved_pose_;                   // ~last_pose
 
   ros::Publisher odom_pub_, status_pub_, aligned_pub_;
   ros::Subscriber points_sub_, initial_pose_sub_, imu_sub_, odom_in_sub_, map_sub_, hint_sub_;

@@ -39,6 +39,7 @@ ProviderConfig loadProviderConfig(const ros::NodeHandle& pnh) {
   load(pnh, "publish_map_cloud", c.publish_map_cloud);
   load(pnh, "map_cloud_period", c.map_cloud_period);
   load(pnh, "map_frame", c.map_frame);
+  load(pnh, "save_pose_rate", c.save_pose_rate);
   return c.checked();
 }
 

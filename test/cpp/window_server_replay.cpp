@@ -60,7 +60,8 @@ json providerDefaults() {
           {"pose_source", c.pose_source},
           {"publish_map_cloud", c.publish_map_cloud},
           {"map_cloud_period", c.map_cloud_period},
-          {"map_frame", c.map_frame}};
+          {"map_frame", c.map_frame},
+          {"save_pose_rate", c.save_pose_rate}};
 }
 
 int main(int argc, char** argv) {

@@ -10,11 +10,13 @@ synthetic drive is played with `rosbag play --clock`; during it, in bag time:
   errors, once per delta that names them, keep matching on the tiles it has, ask for the whole window when the
   directory is back, and read the repaired files at the next reset (the provider's respawn below). The tiles it
   holds are checked through status.target_points against the window that the deltas describe.
-- PROVIDER_KILL: the map provider is killed with SIGKILL: respawned, it sends the localizer a reset delta of the
+- PROVIDER_KILL: the rospy map provider is killed with SIGKILL (the nodelet, which lives in the localizer's
+  manager, is asked for a reset with ~resend instead): respawned, it sends the localizer a reset delta of the
   window; the trajectory must go on within 5 cm of the ground truth, every scan matched. The ground truth stands
   in for the uninterrupted run: ndt_localizer.test holds the uninterrupted tiles run to 5 cm of it, and this test
   checks the poses before the kill against the same 5 cm.
-- LOCALIZER_KILL: the localizer's nodelet manager is killed with SIGKILL: both respawn; the new nodelet has no
+- LOCALIZER_KILL: the localizer's nodelet manager is killed with SIGKILL (with the provider nodelet in it: that
+  one resumes its window at the pose it saved in its own ~last_pose): both respawn; the new nodelet has no
   pose and must publish nothing until its global search around the last published position finds the vehicle;
   from then on within 5 cm. That position is the one the killed nodelet saved on the parameter server
   (~last_pose, polled during the drive and read at the kill): the respawned nodelet logs that it searches around
@@ -46,6 +48,7 @@ from geometry_msgs.msg import PoseWithCovarianceStamped
 from grid_puzzle_localization.msg import NdtStatus, TileDelta
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Log
+from std_srvs.srv import Trigger
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "python"))
 from fault_report import record
@@ -70,6 +73,8 @@ WAIT = 60.0  # [s] upper bound on waiting for a process or a connection (never a
 TOLERANCE = 0.05  # [m]
 LOCALIZER = "/ndt_localizer"
 RESUMES = re.compile(r"resumes searching around \(([-0-9.]+), ([-0-9.]+)\)")  # the respawned nodelet's INFO
+# The respawned provider's INFO: where it serves the window until a pose arrives.
+SERVES = re.compile(r"serves the window around \(([-0-9.]+), ([-0-9.]+)\)")
 LAUNCH = """<launch>
   <param name="use_sim_time" value="true"/>
   <include file="$(find grid_puzzle_localization)/launch/ndt_localizer.launch">
@@ -83,6 +88,7 @@ LAUNCH = """<launch>
   <param name="ndt_localizer/tiles/cache_mb" value="0.0"/>
   <include file="$(find grid_puzzle_localization)/launch/grid_puzzle_map_provider.launch">
     <arg name="tile_dir" value="{tiles}"/>
+    <arg name="provider" value="{provider}"/>
   </include>
   <param name="grid_puzzle_map_provider/tiles/grid_size" value="{tile}"/>
   <param name="grid_puzzle_map_provider/window/n" value="7"/>
@@ -104,6 +110,7 @@ class Recorder:
         self.added: list[tuple[float, set]] = []  # (arrival, tiles the delta adds)
         self.errors: list[tuple[float, str]] = []
         self.resumes: list[tuple[float, np.ndarray]] = []  # (arrival, (x, y) the respawned nodelet searches around)
+        self.serves: list[tuple[float, np.ndarray]] = []  # (arrival, (x, y) the respawned provider serves around)
         rospy.Subscriber("/odom", Odometry, self._on_odom, queue_size=100)
         rospy.Subscriber("/ndt_localizer/status", NdtStatus, self._on_status, queue_size=100)
         rospy.Subscriber("/tile_delta", TileDelta, self._on_delta, queue_size=100)
@@ -129,9 +136,10 @@ class Recorder:
     def _on_log(self, msg: Log) -> None:
         if msg.level >= Log.ERROR:
             self.errors.append((time.monotonic(), msg.msg))
-        match = RESUMES.search(msg.msg)
-        if match:
-            self.resumes.append((time.monotonic(), np.array([float(match.group(1)), float(match.group(2))])))
+        for pattern, found in ((RESUMES, self.resumes), (SERVES, self.serves)):
+            match = pattern.search(msg.msg)
+            if match:
+                found.append((time.monotonic(), np.array([float(match.group(1)), float(match.group(2))])))
 
     def window_at(self, t: float) -> frozenset:
         before = [w for arrival, w in self.windows if arrival <= t]
@@ -158,7 +166,8 @@ class LocalizerFaultsTest(unittest.TestCase):
         index = load_tile_index(tmp / "tiles")
         cls.points = {e.key: e.points for e in index.tiles}
         cls.files = {e.key: e.file for e in index.tiles}
-        (tmp / "stack.launch").write_text(LAUNCH.format(tiles=tmp / "tiles", tile=TILE))
+        cls.provider = rospy.get_param("~provider")
+        (tmp / "stack.launch").write_text(LAUNCH.format(tiles=tmp / "tiles", tile=TILE, provider=cls.provider))
         cls.rec = Recorder()
         cls.log = open(tmp / "roslaunch.log", "w")  # noqa: SIM115 (closed in tearDownClass)
         cls.launch = subprocess.Popen(["roslaunch", str(tmp / "stack.launch")], stdout=cls.log, stderr=cls.log)
@@ -172,7 +181,9 @@ class LocalizerFaultsTest(unittest.TestCase):
     def run_drive(cls) -> None:
         # Not latched: a respawned localizer must not take the start pose again.
         pose_pub = rospy.Publisher("/initialpose", PoseWithCovarianceStamped, queue_size=1)
-        replay.wait_until_subscribed([pose_pub], "the localizer and the provider", connections=2)
+        # The provider nodelet shares the localizer's process, and so its connection.
+        connections = 2 if cls.provider == "rospy" else 1
+        replay.wait_until_subscribed([pose_pub], "the localizer and the provider", connections=connections)
         pose_pub.publish(replay.initial_pose_msg(cls.drive.pose(0.0)))
         time.sleep(4.0)  # the provider's first window reaches the localizer, which reads the tiles
         cls.pids = {
@@ -191,7 +202,7 @@ class LocalizerFaultsTest(unittest.TestCase):
             ("dir_gone", DIR_GONE, lambda: tiles.rename(tiles.with_name("tiles.away"))),
             ("dir_back", DIR_BACK, lambda: tiles.with_name("tiles.away").rename(tiles)),
             ("repair", REPAIR, cls.repair_tiles),
-            ("provider", PROVIDER_KILL, lambda: os.kill(cls.pids["provider"], signal.SIGKILL)),
+            ("provider", PROVIDER_KILL, cls.reset_provider),
             ("manager", LOCALIZER_KILL, lambda: os.kill(cls.pids["manager"], signal.SIGKILL)),
         )
         for name, at, act in events:
@@ -209,6 +220,15 @@ class LocalizerFaultsTest(unittest.TestCase):
             name: node_pid(f"/{node}", NAME, WAIT, other_than=cls.pids[name])
             for name, node in (("provider", "grid_puzzle_map_provider"), ("manager", "localizer_manager"))
         }
+
+    @classmethod
+    def reset_provider(cls) -> None:
+        """The rospy provider is killed with SIGKILL (respawned, it sends a reset delta). The nodelet cannot die
+        alone (it lives in the localizer's manager, killed below): it is asked for a reset with ~resend."""
+        if cls.provider == "rospy":
+            os.kill(cls.pids["provider"], signal.SIGKILL)
+        else:
+            rospy.ServiceProxy("/grid_puzzle_map_provider/resend", Trigger)()
 
     @classmethod
     def tile_path(cls, key: tuple[int, int]) -> Path:
@@ -300,6 +320,8 @@ class LocalizerFaultsTest(unittest.TestCase):
         )
 
     def test_provider_sigkill_trajectory_within_5cm(self) -> None:
+        if self.provider != "rospy":
+            self.skipTest("the provider nodelet dies only with the localizer's manager (the manager kill)")
         kill = self.kills["provider"]
         resets = [t for t in self.rec.resets if t > kill]
         self.assertTrue(resets, "no reset delta after the provider was killed")
@@ -346,6 +368,12 @@ class LocalizerFaultsTest(unittest.TestCase):
         self.assertTrue(resumes, "the respawned nodelet did not log that it resumes around the saved pose")
         saved_xy = self.saved_at_kill[1][:2, 3]
         self.assertLess(float(np.linalg.norm(resumes[0] - saved_xy)), 0.01, f"searches around {resumes[0]}")
+        if self.provider == "nodelet":
+            # Killed with the manager, the provider nodelet served its window at the pose it had saved (where the
+            # vehicle was, to within the drive between its saves), so the localizer's search had a map.
+            serves = [xy for arrival, xy in self.rec.serves if arrival > kill]
+            self.assertTrue(serves, "the respawned provider nodelet did not resume its window at its saved pose")
+            self.assertLess(float(np.linalg.norm(serves[0] - saved_xy)), 5.0, f"window around {serves[0]}")
         # A pose for a scan stamped before the kill comes from the dying process, even when it arrives after the
         # kill (its status may never have gone out); the respawn only sees scans played after it started.
         respawn = self.kill_stamps["manager"]

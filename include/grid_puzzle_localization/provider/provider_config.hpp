@@ -17,6 +17,7 @@ struct ProviderConfig {
   bool publish_map_cloud = false;     ///< publish the merged window on the latched `map_cloud`
   double map_cloud_period = 1.0;      ///< [s] publish map_cloud at most this often; 0 = every change
   std::string map_frame = "map";      ///< frame of the tiles, the incoming poses and every published cloud
+  double save_pose_rate = 0.5;        ///< [Hz] write the newest pose to ~last_pose (0 = never); read at start
 
   /// Throws std::invalid_argument naming the first bad parameter; returns the config with the window resolved.
   ProviderConfig checked() const;

@@ -17,6 +17,9 @@ ProviderConfig ProviderConfig::checked() const {
   if (!(std::isfinite(lost_max_half_side) && lost_max_half_side >= 0.0))
     throw std::invalid_argument("parameter lost/max_half_side must be >= 0 m (got " +
                                 std::to_string(lost_max_half_side) + "); 0 = off");
+  if (!(std::isfinite(save_pose_rate) && save_pose_rate >= 0.0))
+    throw std::invalid_argument("parameter save_pose_rate must be >= 0 Hz (got " + std::to_string(save_pose_rate) +
+                                "); 0 = off");
   if (pose_source != "odom" && pose_source != "pose")
     throw std::invalid_argument("parameter pose_source '" + pose_source + "' is unknown; use one of odom, pose");
   ProviderConfig c = *this;

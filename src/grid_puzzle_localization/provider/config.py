@@ -39,6 +39,7 @@ class ProviderConfig:
     publish_map_cloud: bool = False  # publish the merged window on the latched `map_cloud` (read while subscribed)
     map_cloud_period: float = 1.0  # [s] publish map_cloud at most this often (the latest window); 0 = every change
     map_frame: str = "map"  # frame of the tiles, the incoming poses and every published cloud
+    save_pose_rate: float = 0.5  # [Hz] write the newest pose to ~last_pose (0 = never); a respawn starts there
 
     def checked(self) -> ProviderConfig:
         """Raises UserError naming the first bad parameter; returns self with the window resolved."""
@@ -52,6 +53,8 @@ class ProviderConfig:
             raise UserError(f"parameter map_cloud_period must be >= 0 s (got {self.map_cloud_period})")
         if not (math.isfinite(self.lost.max_half_side) and self.lost.max_half_side >= 0.0):
             raise UserError(f"parameter lost/max_half_side must be >= 0 m (got {self.lost.max_half_side}); 0 = off")
+        if not (math.isfinite(self.save_pose_rate) and self.save_pose_rate >= 0.0):
+            raise UserError(f"parameter save_pose_rate must be >= 0 Hz (got {self.save_pose_rate}); 0 = off")
         if self.pose_source not in POSE_SOURCES:
             raise UserError(f"parameter pose_source '{self.pose_source}' is unknown; use one of {POSE_SOURCES}")
         return dataclasses.replace(self, window=self.window.resolved())

@@ -39,6 +39,7 @@ from grid_puzzle_localization.provider.tile_references import TileReferences
 from grid_puzzle_localization.provider.window import PoseSample, Window, WindowTracker
 from grid_puzzle_localization.provider.window_server import Served, WindowServer
 from grid_puzzle_localization.ros.msgs.provider import pose_sample, provider_status, stamped, tile_delta
+from grid_puzzle_localization.ros.saved_pose import SavedPoseWriter, read_saved_pose
 from grid_puzzle_localization.tiles.directory import open_tile_directory
 from grid_puzzle_localization.util.malloc_tuning import limit_arenas, pin_mmap_threshold
 
@@ -103,6 +104,12 @@ class MapProviderNode:
             rospy.Subscriber("pose", PoseWithCovarianceStamped, self._on_pose, queue_size=1)
         if self.config.lost.max_half_side > 0.0:
             rospy.Subscriber("localizer_status", NdtStatus, self._on_localizer_status, queue_size=1)
+        self._saved_pose = SavedPoseWriter(self.config.save_pose_rate)
+        saved = read_saved_pose()
+        if saved is not None:
+            # A respawn: the window is served at the pose the killed process saved until a pose arrives.
+            rospy.loginfo("serves the window around (%.2f, %.2f), the pose saved in ~last_pose", saved[0], saved[1])
+            self._latest = PoseSample(saved[0], saved[1], 0.0, saved[5])
         self._worker = threading.Thread(target=self._run, name="map_provider_worker", daemon=True)
         self._worker.start()
         rospy.loginfo(
@@ -180,6 +187,7 @@ class MapProviderNode:
             if search is not None:
                 self._cover_search(search)
             if pose is not None:
+                self._saved_pose.set([pose.x, pose.y, 0.0, 0.0, 0.0, pose.yaw or 0.0], pose.t)
                 start = time.perf_counter()
                 with self._lock:
                     served = self.server.on_pose(pose)
