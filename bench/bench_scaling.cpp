@@ -1,12 +1,13 @@
 // Memory and CPU of the localizer as the map grows: the same drive through maps of F times a base map's area
 // (the base repeated on a sqrt(F) x sqrt(F) grid), once with the whole map (global: the PCD read by the map
 // worker, as map_source pcd) and once with a grid puzzle window of tile files read by reference (as
-// map_source tiles). No ROS. Driven by bench/bench_scaling.py, one process per map size and mode so that each
-// peak RSS is that run's alone.
+// map_source tiles), the window served in the same process by the provider nodelet's core (WindowServer), as the
+// nodelet runs in the localizer's manager, so its memory counts. No ROS. Driven by bench/bench_scaling.py, one process
+// per map size and mode so that each peak RSS is that run's alone.
 //
 // Usage:
 //   bench_scaling prepare BASE.pcd FACTOR DIR TILE_SIZE SECONDS
-//       writes DIR/global.pcd, DIR/tiles/<cx>_<cy>.pcd and the drive's scans (DIR/scans.bin)
+//       writes DIR/global.pcd, DIR/tiles/<cx>_<cy>.pcd with their index.json and the drive's scans (DIR/scans.bin)
 //   bench_scaling run DIR global|tiles TILE_SIZE N K SECONDS
 //   bench_scaling load DIR TILE_SIZE REPEATS   every tile of DIR/tiles into an empty target, one map thread
 // `run` prints one JSON object: peak RSS, the map's memory (RSS with the first map minus RSS before it), mean
@@ -25,6 +26,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <random>
 #include <set>
 #include <string>
@@ -33,6 +35,7 @@
 
 #include "grid_puzzle_localization/localizer.hpp"
 #include "grid_puzzle_localization/pcd_reader.hpp"
+#include "grid_puzzle_localization/provider/window_server.hpp"
 #include "tile_files.hpp"
 
 namespace gpl = grid_puzzle_localization;
@@ -120,6 +123,20 @@ gpl::PointCloud readScan(std::ifstream& in) {
   return scan;
 }
 
+// A minimal tile index (what the provider reads: format, version, grid size and the keys in order), as `gpm tile`
+// writes a full one beside the tiles.
+void writeIndex(const std::string& tile_dir, const std::set<std::pair<long, long>>& keys, double s) {
+  std::ofstream out(tile_dir + "/index.json");
+  out << "{\"format\": \"grid_puzzle_tiles\", \"version\": 1, \"grid_size\": " << s << ", \"tiles\": [";
+  const char* sep = "";
+  for (const auto& k : keys) {
+    out << sep << "{\"key\": [" << k.first << ", " << k.second << "]}";
+    sep = ", ";
+  }
+  out << "]}\n";
+  if (!out) throw std::runtime_error("cannot write " + tile_dir + "/index.json");
+}
+
 // Copies are one whole number of tiles apart, so no tile holds points of two copies.
 double period(float lo, float hi, double s) { return std::ceil((hi - lo) / s + 1.0) * s; }
 
@@ -130,6 +147,7 @@ int prepare(const std::string& base_path, int factor, const std::string& dir, do
   const Extent e = extentOf(base);
   const double px = period(e.x0, e.x1, s), py = period(e.y0, e.y1, s);
   fs::create_directories(dir + "/tiles");
+  std::set<std::pair<long, long>> keys;
   std::ofstream global(dir + "/global.pcd", std::ios::binary);
   const std::size_t n = base.size() * factor;
   global << "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH " << n
@@ -141,42 +159,14 @@ int prepare(const std::string& base_path, int factor, const std::string& dir, do
       for (auto& p : copy) p += offset;
       global.write(reinterpret_cast<const char*>(copy.data()), copy.size() * sizeof(gpl::Point));
       gpl::test::writeTiles(dir + "/tiles", gpl::test::cutTileStems(copy, s));
+      for (const auto& p : copy)
+        keys.emplace(static_cast<long>(std::floor(p.x() / s)), static_cast<long>(std::floor(p.y() / s)));
     }
+  writeIndex(dir + "/tiles", keys, s);
   if (!global) throw std::runtime_error("cannot write " + dir + "/global.pcd");
   std::ofstream(dir + "/extent.txt") << e.x0 << ' ' << e.y0 << ' ' << e.x1 << ' ' << e.y1 << '\n';  // of the base
   writeScans(base, e, seconds, dir + "/scans.bin");
   return 0;
-}
-
-struct TileKeyLess {
-  bool operator()(const gpl::TileKey& a, const gpl::TileKey& b) const { return a.i != b.i ? a.i < b.i : a.j < b.j; }
-};
-using TileSet = std::set<gpl::TileKey, TileKeyLess>;
-
-std::string stem(const gpl::TileKey& k, double s) { return gpl::test::tileStem(k.i, k.j, s); }
-
-bool tileExists(const std::string& tile_dir, const gpl::TileKey& k, double s) {
-  struct stat st;
-  return ::stat((tile_dir + "/" + stem(k, s) + ".pcd").c_str(), &st) == 0;
-}
-
-// The paper's window (Eq. 3 and Table I): a (2n+1)^2 square around the pose's tile, extended by k tiles
-// toward the heading's sector (the same table as provider/window.py), holding the tiles whose file exists.
-// Existence is asked of the file system for tiles not in `known` (the provider keeps the key list of the whole
-// map instead; here that list would count against the localizer's memory, which is what is measured).
-TileSet window(const std::string& tile_dir, const TileSet& known, double x, double y, double heading, double s, int n,
-               int k) {
-  const long i = static_cast<long>(std::floor(x / s)), j = static_cast<long>(std::floor(y / s));
-  const double deg = std::fmod(heading * 180.0 / M_PI + 20.0 + 720.0, 360.0) - 20.0;
-  static const int table[8][5] = {{20, 1, 0, 0, 0},   {70, 1, 0, 1, 0},    {110, 0, 0, 1, 0},  {160, 0, -1, 1, 0},
-                                  {200, 0, -1, 0, 0}, {250, 0, -1, 0, -1}, {290, 0, 0, 0, -1}, {340, 1, 0, 0, -1}};
-  int row = 0;
-  while (row < 7 && deg >= table[row][0]) ++row;
-  TileSet out;
-  for (long u = i - n + table[row][2] * k; u <= i + n + table[row][1] * k; ++u)
-    for (long v = j - n + table[row][4] * k; v <= j + n + table[row][3] * k; ++v)
-      if (known.count({u, v}) || tileExists(tile_dir, {u, v}, s)) out.insert({u, v});
-  return out;
 }
 
 std::size_t pcdPoints(const std::string& path) {
@@ -201,35 +191,40 @@ int run(const std::string& dir, const std::string& mode, double s, int n, int k,
 
   const double rss_before = procStatusMb("VmRSS");
   gpl::Localizer loc(config);
-  TileSet loaded;
-  Eigen::Vector2d anchor(NAN, NAN);
-  double heading = 0.0;
+  std::optional<gpl::WindowServer> provider;  // tiles: the provider nodelet's core, in this process as in the manager
   std::size_t updates = 0;
-  auto follow = [&](const Eigen::Vector3d& at, bool first) {
-    if (!first && (at.head<2>() - anchor).norm() <= s / 2) return;  // the s/2 update rule
-    if (!first) heading = std::atan2(at.y() - anchor.y(), at.x() - anchor.x());
-    anchor = at.head<2>();
-    const TileSet want = window(tile_dir, loaded, at.x(), at.y(), heading, s, n, k);
-    const Eigen::Vector2d ahead = anchor + 1.01 * (s / 2) * Eigen::Vector2d(std::cos(heading), std::sin(heading));
+  const auto stems = [s](const std::vector<gpl::TileKey>& keys) {
+    std::vector<std::string> out;
+    for (const gpl::TileKey& key : keys) out.push_back(gpl::tileStem(key.i, key.j, s));
+    return out;
+  };
+  auto follow = [&](const Eigen::Vector3d& at, double t) {
+    gpl::PoseSample pose;
+    pose.x = at.x();
+    pose.y = at.y();
+    pose.t = t;
+    const std::optional<gpl::Served> served = provider->onPose(pose);  // the s/2 update rule, the heading
+    if (!served) return;
     gpl::TileFileChange change;
     change.dir = tile_dir;
-    change.index_revision = "1";
-    change.reset = first;
-    for (const auto& key : want)
-      if (!loaded.count(key)) change.added.push_back(stem(key, s));
-    for (const auto& key : loaded)
-      if (!want.count(key)) change.removed.push_back(stem(key, s));
-    for (const auto& key : window(tile_dir, want, ahead.x(), ahead.y(), heading, s, n, k))
-      if (!want.count(key)) change.prefetch.push_back(stem(key, s));
+    change.index_revision = provider->tiles().revision();
+    change.reset = served->first;
+    change.added = stems(served->delta.added);
+    change.removed = stems(served->delta.removed);
+    change.prefetch = stems(served->delta.prefetch);
     loc.map().submit(gpl::MapChange::tileFiles(s, std::move(change)));
-    loaded = want;
     ++updates;
   };
   const auto load_start = std::chrono::steady_clock::now();
-  if (tiles)
-    follow(truthAt(0.0).translation(), true);
-  else
+  if (tiles) {
+    gpl::WindowConfig window;
+    window.n = n;
+    window.k = k;
+    provider.emplace(window, 0.0, gpl::openTileDirectory(tile_dir, 0.0));
+    follow(truthAt(0.0).translation(), 0.0);
+  } else {
     loc.map().submit(gpl::MapChange::pcdFile(dir + "/global.pcd"));
+  }
   loc.map().waitIdle();
   const double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - load_start).count();
   const gpl::MapUpdateStats first = loc.map().stats();
@@ -242,7 +237,7 @@ int run(const std::string& dir, const std::string& mode, double s, int n, int k,
   const double process_cpu_start = cpuSeconds(CLOCK_PROCESS_CPUTIME_ID);
   for (int c = 0; c < scans; ++c) {
     const double t = c / kRate;
-    if (tiles) follow(truthAt(t).translation(), false);
+    if (tiles) follow(truthAt(t).translation(), t);
     const gpl::PointCloud scan = readScan(scan_file);
     const double cpu0 = cpuSeconds(CLOCK_THREAD_CPUTIME_ID);
     const gpl::LocalizerOutput out = loc.processScan(t, scan, Eigen::Isometry3d::Identity());

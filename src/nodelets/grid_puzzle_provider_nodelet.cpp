@@ -115,7 +115,7 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
     {
       std::lock_guard<std::mutex> lock(input_mutex_);
       if (msg->lost && msg->search_radius > 0.0) {
-        search_ = SearchRegion{msg->search_x, msg->search_y, msg->search_radius, msg->header.stamp.toSec()};
+        search_ = LostSearchRegion{msg->search_x, msg->search_y, msg->search_radius, msg->header.stamp.toSec()};
         tracking_again_ = false;
       } else if (msg->match_accepted) {
         search_.reset();
@@ -154,7 +154,7 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
   void run() {
     while (true) {
       std::optional<PoseSample> pose;
-      std::optional<SearchRegion> search;
+      std::optional<LostSearchRegion> search;
       bool tracking_again = false;
       {
         std::unique_lock<std::mutex> lock(input_mutex_);
@@ -192,7 +192,7 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
     if (server_) return true;
     try {
       TileDirectory directory = openTileDirectory(config_.tiles_dir, config_.tiles_grid_size);
-      const std::size_t tiles = directory.codes.size();
+      const std::size_t tiles = directory.tiles.size();
       if (!directory.unparsable.empty())
         NODELET_WARN("%s: %zu .pcd files are not tiles of side %g m and are ignored, e.g. %s",
                      config_.tiles_dir.c_str(), directory.unparsable.size(), directory.grid_size,
@@ -215,7 +215,7 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
   }
 
   // Serves the window that holds the lost localizer's search region.
-  void coverSearch(const SearchRegion& region) {
+  void coverSearch(const LostSearchRegion& region) {
     const auto start = std::chrono::steady_clock::now();
     std::optional<Served> served;
     bool first = false;
@@ -336,7 +336,7 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
   std::mutex input_mutex_;  // what the callbacks hand to the worker
   std::condition_variable input_ready_;
   std::optional<PoseSample> latest_;
-  std::optional<SearchRegion> search_;
+  std::optional<LostSearchRegion> search_;
   bool tracking_again_ = false;
   bool stop_ = false;
   std::thread worker_;

@@ -26,7 +26,8 @@ from grid_puzzle_localization.tiles.directory import open_tile_directory
 from grid_puzzle_localization.tiles.grid import tile_stem
 
 POSES_PER_SEQUENCE = 700  # 15 sequences: 10,500 poses
-# (tile side [m], window config, lost max half side [m], directory with an index or scanned)
+# (tile side [m], window config, lost max half side [m], directory with an index (its tiles in key order as the tiler
+# writes them, or shuffled) or scanned)
 SEQUENCES = [
     (2.0, WindowConfig(preset="urban"), 100.0, "index"),
     (2.0, WindowConfig(preset="courtyard"), 60.0, "scan"),
@@ -36,11 +37,11 @@ SEQUENCES = [
     (2.5, WindowConfig(n=3, k=7, lookahead_time=1.5), 30.0, "scan"),
     (1.0, WindowConfig(n=0, k=2, update_distance=0.3), 0.0, "index"),
     (10.0, WindowConfig(n=2, k=1, lookahead_time=0.8, heading_source="yaw"), 50.0, "scan"),
-    (2.0, WindowConfig(n=4, k=0), 20.0, "index"),
+    (2.0, WindowConfig(n=4, k=0), 20.0, "shuffled index"),
     (0.7, WindowConfig(n=8, k=5, update_distance=2.0), 15.0, "scan"),
     (3.0, WindowConfig(n=1, k=3), 25.0, "index"),
     (2.0, WindowConfig(n=10, k=6, heading_source="yaw", lookahead_time=0.5), 35.0, "scan"),
-    (1.5, WindowConfig(n=2, k=2), 12.0, "index"),
+    (1.5, WindowConfig(n=2, k=2), 12.0, "shuffled index"),
     (5.0, WindowConfig(n=3, k=4, heading_source="yaw"), 45.0, "scan"),
     (2.0, WindowConfig(n=7, k=9, lookahead_time=2.0), 70.0, "index"),
 ]
@@ -70,6 +71,8 @@ def make_tile_dir(root: Path, s: float, source: str, rng: random.Random) -> Path
         (root / "notes.pcd").touch()  # not a tile name: both sides must ignore it
     else:
         tiles = [{"key": [i, j], "stem": tile_stem(i, j, s), "file": f"{tile_stem(i, j, s)}.pcd"} for i, j in keys]
+        if source == "shuffled index":
+            rng.shuffle(tiles)
         index = {"format": "grid_puzzle_tiles", "version": 1, "grid_size": s, "origin": [0.0, 0.0], "tiles": tiles}
         (root / "index.json").write_text(json.dumps(index))
     return root

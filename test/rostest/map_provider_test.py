@@ -4,8 +4,8 @@ tiled map written into a temp dir and drives poses along a path with turns. Chec
 reference), the merged map_cloud (switched on here) and the status against a brute-force selection over the
 directory listing, and the standing start, a corrupt tile (named in the deltas, left out of map_cloud: the localizer
 reports it), late subscribers, ~resend, a pose far off the map, the window grown for a lost localizer's search, a
-tile directory rewritten under the node and a missing tile directory (the rospy node exits, the nodelet keeps
-retrying and serves the directory once it exists)."""
+tile directory rewritten under the node, a missing tile directory (the rospy node exits, the nodelet keeps
+retrying and serves the directory once it exists) and a negative window n."""
 
 import math
 import os
@@ -345,6 +345,16 @@ class MapProviderTest(unittest.TestCase):
         finally:
             proc.terminate()
             proc.wait(timeout=WAIT)
+
+    def test_7_a_negative_window_n_is_named(self):
+        # In a manager, the nodelet's loader exits with the error and the manager (the localizer) keeps running.
+        rospy.set_param("/bad_n_provider/tiles/dir", self.dir)
+        rospy.set_param("/bad_n_provider/tiles/grid_size", S)
+        rospy.set_param("/bad_n_provider/window/n", -1)
+        command = [*provider_command(self.provider, "bad_n_provider"), "tile_delta:=/bad_n_delta"]
+        done = subprocess.run(command, capture_output=True, text=True, timeout=WAIT)
+        self.assertNotEqual(done.returncode, 0)
+        self.assertIn("window n and k must be integers >= 0 (got n=-1", done.stdout + done.stderr)
 
 
 if __name__ == "__main__":

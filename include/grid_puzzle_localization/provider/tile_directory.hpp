@@ -1,6 +1,7 @@
 // Which tiles a tile directory holds, from its index.json (read as a stream: no document in memory) or by scanning
 // the <cx>_<cy>.pcd names; the C++ twin of src/grid_puzzle_localization/tiles/directory.py and tiles/grid.py's names.
-// Keys are one sorted array of 64-bit codes, so a window query is two binary searches per row of tiles. No ROS.
+// The tiles are kept as runs of consecutive j per row i, so the memory follows the map's outline, not its area: the
+// provider nodelet lives in the localizer's process, whose memory must not grow with the map. No ROS.
 #pragma once
 
 #include <cstdint>
@@ -27,17 +28,39 @@ bool parseTileStem(const std::string& stem, double s, TileKey& key);
 /// Identity of a directory's contents: its index file's inode, time and size, else the directory's own.
 std::string tileIndexRevision(const std::string& dir);
 
+/// A set of tiles as runs [j_first, j_last] of consecutive tiles per row i (rows by i, runs by j). A solid square
+/// map of a million tiles takes a thousand runs. Built from keys in (i, j) order.
+class TileRuns {
+ public:
+  /// Adds a tile after every tile added so far in (i, j) order; false (nothing added) when it is not after them.
+  bool append(std::int64_t i, std::int64_t j);
+  /// Codes (encodeTileKey) of the tiles inside `box`, in (i, j) order, appended to `out`.
+  void codesInBox(const TileBox& box, std::vector<std::uint64_t>& out) const;
+  std::size_t size() const { return size_; }
+  std::size_t runCount() const { return runs_.size(); }
+  bool empty() const { return size_ == 0; }
+  /// Over all tiles; not when empty().
+  TileBox bounds() const;
+
+ private:
+  struct Run {
+    std::int64_t j_first, j_last;
+  };
+  std::vector<std::int64_t> row_i_;     // i of each row
+  std::vector<std::size_t> row_first_;  // index in runs_ of each row's first run
+  std::vector<Run> runs_;
+  std::size_t size_ = 0;
+};
+
 struct TileDirectory {
   std::string path;
   double grid_size = 0.0;               ///< s [m]
-  std::vector<std::uint64_t> codes;     ///< encodeTileKey of every tile, sorted
+  TileRuns tiles;                       ///< every tile of the directory
   std::string source;                   ///< "index" or "scan"
   std::vector<std::string> unparsable;  ///< *.pcd names that are not tiles of side s (scan only)
   TileBox bounds;                       ///< over all tiles
 
   std::string tilePath(const TileKey& key) const { return path + "/" + tileStem(key.i, key.j, grid_size) + ".pcd"; }
-  /// Codes of the tiles inside `box`, sorted (appended to `out`).
-  void codesInBox(const TileBox& box, std::vector<std::uint64_t>& out) const;
 };
 
 /// Opens `path` through its index.json, or by scanning it when there is none. `grid_size` [m]: 0 takes the index's;

@@ -100,7 +100,7 @@ class WindowTracker {
 };
 
 /// Where a lost localizer searches: centre [m] (map frame), radius [m], stamp [s].
-struct SearchRegion {
+struct LostSearchRegion {
   double x = 0.0, y = 0.0, radius = 0.0, t = 0.0;
 };
 
@@ -112,7 +112,7 @@ class LostSearchWindow {
   LostSearchWindow(double max_half_side, double reach, double s)
       : max_half_side_(max_half_side), reach_(reach), s_(s) {}
   /// The window for `region`, or nullopt when `served` is it already; once one is returned the window serves it.
-  std::optional<Window> cover(const SearchRegion& region, const std::optional<Window>& pose_window,
+  std::optional<Window> cover(const LostSearchRegion& region, const std::optional<Window>& pose_window,
                               const std::optional<TileBox>& served);
   /// The localizer tracks again; true when a search's window was being served.
   bool end() {

@@ -29,7 +29,7 @@ class WindowServer {
     if (lost_.end()) tracker_.restart();
   }
   /// The window holding the lost localizer's search region, or nullopt when it is served already.
-  std::optional<Served> onSearch(const SearchRegion& region);
+  std::optional<Served> onSearch(const LostSearchRegion& region);
   /// The window after `pose`, or nullopt when it stays (not moved far enough, or a search's window is served).
   std::optional<Served> onPose(const PoseSample& pose);
   /// True when the tile directory was rewritten (a new index revision): the whole window is due as a reset. Throws

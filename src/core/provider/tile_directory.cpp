@@ -61,7 +61,9 @@ double checkedGridSize(double s, const std::string& path) {
 class IndexReader {
  public:
   using json = nlohmann::json;
-  std::vector<std::uint64_t> codes;
+  // The tiler writes its keys sorted: they go straight into runs. Keys out of order are collected and sorted.
+  TileRuns runs;
+  std::vector<std::uint64_t> unsorted;
   std::string format;
   std::uint64_t version = 0;
   double grid_size = std::nan("");
@@ -91,7 +93,8 @@ class IndexReader {
       in_key_array_ = false;
       if (key_values_ != 2) return fail("a tile key is not [i, j]");
       try {
-        codes.push_back(encodeTileKey(key_i_, key_j_));
+        const std::uint64_t code = encodeTileKey(key_i_, key_j_);
+        if (!unsorted.empty() || !runs.append(key_i_, key_j_)) unsorted.push_back(code);
       } catch (const std::out_of_range& e) {
         return fail(e.what());
       }
@@ -143,7 +146,20 @@ class IndexReader {
   std::int64_t key_i_ = 0, key_j_ = 0;
 };
 
-double readIndexKeys(const std::string& index_path, std::vector<std::uint64_t>& codes) {
+// `runs` with the tiles of `codes` (any order; duplicates dropped).
+TileRuns withCodes(TileRuns runs, std::vector<std::uint64_t> codes) {
+  if (codes.empty()) return runs;
+  if (!runs.empty()) runs.codesInBox(runs.bounds(), codes);
+  std::sort(codes.begin(), codes.end());
+  TileRuns out;
+  for (const std::uint64_t c : codes) {
+    const TileKey k = decodeTileKey(c);
+    out.append(k.i, k.j);
+  }
+  return out;
+}
+
+TileRuns readIndexKeys(const std::string& index_path, double& grid_size) {
   std::ifstream in(index_path, std::ios::binary);
   IndexReader reader;
   std::string problem;
@@ -158,26 +174,26 @@ double readIndexKeys(const std::string& index_path, std::vector<std::uint64_t>& 
   }
   if (!problem.empty())
     throw std::invalid_argument(index_path + ": not a readable tile index (" + problem + "); re-run `gpm tile`");
-  codes = std::move(reader.codes);
-  std::sort(codes.begin(), codes.end());
-  return reader.grid_size;
+  grid_size = reader.grid_size;
+  return withCodes(std::move(reader.runs), std::move(reader.unsorted));
 }
 
 void scanTiles(TileDirectory& dir) {
   DIR* d = ::opendir(dir.path.c_str());
   if (d == nullptr)
     throw std::invalid_argument("tile directory " + dir.path + " cannot be read; check its permissions");
+  std::vector<std::uint64_t> codes;
   while (const dirent* entry = ::readdir(d)) {
     const std::string name = entry->d_name;
     if (name.size() < 4 || name.compare(name.size() - 4, 4, ".pcd") != 0) continue;
     TileKey key;
     if (parseTileStem(name.substr(0, name.size() - 4), dir.grid_size, key))
-      dir.codes.push_back(encodeTileKey(key.i, key.j));
+      codes.push_back(encodeTileKey(key.i, key.j));
     else
       dir.unparsable.push_back(name);
   }
   ::closedir(d);
-  std::sort(dir.codes.begin(), dir.codes.end());
+  dir.tiles = withCodes(TileRuns(), std::move(codes));
   std::sort(dir.unparsable.begin(), dir.unparsable.end());
 }
 
@@ -230,15 +246,44 @@ std::string tileIndexRevision(const std::string& dir) {
          std::to_string(static_cast<long long>(st.st_mtim.tv_sec) * 1000000000LL + st.st_mtim.tv_nsec);
 }
 
-void TileDirectory::codesInBox(const TileBox& box, std::vector<std::uint64_t>& out) const {
-  const std::int64_t i_min = std::max(box.i_min, bounds.i_min), i_max = std::min(box.i_max, bounds.i_max);
-  const std::int64_t j_lo = std::max(box.j_min, -kOffset), j_hi = std::min(box.j_max, kOffset - 1);
-  if (j_lo > j_hi) return;
-  for (std::int64_t i = i_min; i <= i_max; ++i) {
-    const auto lo = std::lower_bound(codes.begin(), codes.end(), encodeTileKey(i, j_lo));
-    const auto hi = std::upper_bound(lo, codes.end(), encodeTileKey(i, j_hi));
-    out.insert(out.end(), lo, hi);
+bool TileRuns::append(std::int64_t i, std::int64_t j) {
+  if (!row_i_.empty() && (i < row_i_.back() || (i == row_i_.back() && j <= runs_.back().j_last))) return false;
+  if (row_i_.empty() || i != row_i_.back()) {
+    row_i_.push_back(i);
+    row_first_.push_back(runs_.size());
+    runs_.push_back({j, j});
+  } else if (j == runs_.back().j_last + 1) {
+    runs_.back().j_last = j;
+  } else {
+    runs_.push_back({j, j});
   }
+  ++size_;
+  return true;
+}
+
+void TileRuns::codesInBox(const TileBox& box, std::vector<std::uint64_t>& out) const {
+  if (box.empty()) return;
+  for (auto row = std::lower_bound(row_i_.begin(), row_i_.end(), box.i_min); row != row_i_.end() && *row <= box.i_max;
+       ++row) {
+    const std::size_t r = static_cast<std::size_t>(row - row_i_.begin());
+    const auto first = runs_.begin() + static_cast<std::ptrdiff_t>(row_first_[r]);
+    const auto end =
+        r + 1 < row_first_.size() ? runs_.begin() + static_cast<std::ptrdiff_t>(row_first_[r + 1]) : runs_.end();
+    // The first run that ends at or after the box's first column, then every run that starts within the box.
+    auto run = std::lower_bound(first, end, box.j_min, [](const Run& a, std::int64_t j) { return a.j_last < j; });
+    for (; run != end && run->j_first <= box.j_max; ++run)
+      for (std::int64_t j = std::max(run->j_first, box.j_min); j <= std::min(run->j_last, box.j_max); ++j)
+        out.push_back(encodeTileKey(*row, j));
+  }
+}
+
+TileBox TileRuns::bounds() const {
+  TileBox b{row_i_.front(), row_i_.back(), runs_.front().j_first, runs_.front().j_last};
+  for (const Run& run : runs_) {
+    b.j_min = std::min(b.j_min, run.j_first);
+    b.j_max = std::max(b.j_max, run.j_last);
+  }
+  return b;
 }
 
 TileDirectory openTileDirectory(const std::string& path, double grid_size) {
@@ -249,12 +294,13 @@ TileDirectory openTileDirectory(const std::string& path, double grid_size) {
   dir.path = path;
   const std::string index = path + "/" + kIndexFile;
   if (isFile(index)) {
-    const double s = readIndexKeys(index, dir.codes);
+    double s = 0.0;
+    dir.tiles = readIndexKeys(index, s);
     if (grid_size > 0.0 && std::fabs(grid_size - s) > 1e-9 * s)
       throw std::invalid_argument("grid size " + std::to_string(grid_size) + " m disagrees with " + index +
                                   ", which says " + std::to_string(s) +
                                   " m; leave the grid size unset (0) to use the index's");
-    if (dir.codes.empty())
+    if (dir.tiles.empty())
       throw std::invalid_argument("tile directory " + path +
                                   ": its index lists no tiles; re-run `gpm tile` on a non-empty map");
     dir.grid_size = s;
@@ -266,7 +312,7 @@ TileDirectory openTileDirectory(const std::string& path, double grid_size) {
     dir.grid_size = checkedGridSize(grid_size, path);
     dir.source = "scan";
     scanTiles(dir);
-    if (dir.codes.empty())
+    if (dir.tiles.empty())
       throw std::invalid_argument(
           "tile directory " + path +
           " holds no tile files named <cx>_<cy>.pcd for s = " + std::to_string(dir.grid_size) + " m" +
@@ -274,13 +320,7 @@ TileDirectory openTileDirectory(const std::string& path, double grid_size) {
                                   : " (" + std::to_string(dir.unparsable.size()) +
                                         " .pcd files with other names, e.g. " + dir.unparsable.front() + ")"));
   }
-  const TileKey first = decodeTileKey(dir.codes.front()), last = decodeTileKey(dir.codes.back());
-  dir.bounds = {first.i, last.i, kOffset, -kOffset};
-  for (const std::uint64_t c : dir.codes) {
-    const std::int64_t j = decodeTileKey(c).j;
-    dir.bounds.j_min = std::min(dir.bounds.j_min, j);
-    dir.bounds.j_max = std::max(dir.bounds.j_max, j);
-  }
+  dir.bounds = dir.tiles.bounds();
   return dir;
 }
 

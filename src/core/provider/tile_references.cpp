@@ -34,7 +34,7 @@ TileReferences::TileReferences(TileDirectory directory)
 
 std::vector<std::uint64_t> TileReferences::codesIn(const std::vector<TileBox>& boxes) const {
   std::vector<std::uint64_t> codes;
-  for (const TileBox& b : boxes) directory_.codesInBox(b, codes);
+  for (const TileBox& b : boxes) directory_.tiles.codesInBox(b, codes);
   std::sort(codes.begin(), codes.end());
   return codes;
 }

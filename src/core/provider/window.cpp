@@ -168,7 +168,7 @@ std::vector<Window> WindowTracker::predictedWindows() const {
   return out;
 }
 
-std::optional<Window> LostSearchWindow::cover(const SearchRegion& region, const std::optional<Window>& pose_window,
+std::optional<Window> LostSearchWindow::cover(const LostSearchRegion& region, const std::optional<Window>& pose_window,
                                               const std::optional<TileBox>& served) {
   const double half_side = std::min(std::ceil((region.radius + reach_) / kSearchStep) * kSearchStep, max_half_side_);
   const Window window = windowCovering(pose_window, region.x, region.y, half_side, s_);

@@ -7,7 +7,7 @@ WindowServer::WindowServer(const WindowConfig& window, double max_half_side, Til
       tiles_(std::move(directory)),
       lost_(max_half_side, tracker_.config().n * tiles_.directory().grid_size, tiles_.directory().grid_size) {}
 
-std::optional<Served> WindowServer::onSearch(const SearchRegion& region) {
+std::optional<Served> WindowServer::onSearch(const LostSearchRegion& region) {
   const std::optional<TileBox> served = window_ ? std::optional<TileBox>(window_->bounds()) : std::nullopt;
   const std::optional<Window> window = lost_.cover(region, tracker_.window(), served);
   if (!window) return std::nullopt;
