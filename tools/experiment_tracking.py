@@ -154,6 +154,7 @@ def main() -> int:
         subprocess.run([*GPM, *command, "-o", str(scenario), "--force", "--quiet"], check=True)
         shutil.rmtree(run, ignore_errors=True)  # its tiles were cut from the map just replaced
         experiment = [*GPM, "experiment", str(scenario), "-o", str(run), "--ndt-threads", "1", "--rate", args.rate]
+        experiment += ["--modes", *MODES]
         if variant.startswith("mulran"):
             # A car's 64-beam scans reach far beyond the demo window (n 8: 17 m each side); the urban preset's
             # window (n 25: 51 m) covers the range the scans are matched over.
