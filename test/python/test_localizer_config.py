@@ -9,6 +9,7 @@ import re
 from pathlib import Path
 
 import yaml
+from documented_defaults import documented_defaults
 
 ROOT = Path(__file__).resolve().parents[2]
 YAML = ROOT / "config" / "ndt_localizer.yaml"
@@ -32,16 +33,6 @@ FIELDS = {
     "global_localization/yaw_range": "yaw_range",
 }
 CONSTANTS = {"M_PI": math.pi}
-
-
-def documented_defaults(text: str) -> dict:
-    """``{"group/name": value}`` of the commented-out parameter lines ``# group/name: value  # comment``."""
-    out = {}
-    for line in text.splitlines():
-        match = re.match(r"#\s*([a-z_]+(?:/[a-z_]+)*):\s*(\"[^\"]*\"|\[[^\]]*\]|[^\s#]+)", line)
-        if match:
-            out[match.group(1)] = yaml.safe_load(match.group(2))
-    return out
 
 
 def struct_defaults() -> dict:

@@ -1,27 +1,17 @@
 """The provider's parameters: the YAML documents exactly the dataclass defaults; loading and checking."""
 
 import json
-import re
 import subprocess
 from pathlib import Path
 
 import pytest
 import yaml
+from documented_defaults import documented_defaults
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.provider.config import ProviderConfig, load_config, parameter_defaults
 
 YAML = Path(__file__).resolve().parents[2] / "config" / "grid_puzzle_map_provider.yaml"
-
-
-def documented_defaults(text: str) -> dict:
-    """``{"group/name": value}`` of the commented-out parameter lines ``# group/name: value  # comment``."""
-    out = {}
-    for line in text.splitlines():
-        match = re.match(r"#\s*([a-z_]+(?:/[a-z_]+)*):\s*(\S+)\s+#", line)
-        if match:
-            out[match.group(1)] = yaml.safe_load(match.group(2))
-    return out
 
 
 def test_yaml_documents_every_parameter_with_its_default_and_sets_none():
