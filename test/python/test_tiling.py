@@ -3,6 +3,7 @@ order, the tile being floor(x / s), floor(y / s) computed per point in plain Pyt
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -92,6 +93,7 @@ def test_every_point_in_exactly_its_tile_bit_for_bit(tmp_path, s, memory_mb):
         assert entry.bounds["min"] == [float(points[c].min()) for c in "xyz"]
         assert entry.bounds["max"] == [float(points[c].max()) for c in "xyz"]
         assert entry.bytes == index.path(entry).stat().st_size
+        assert entry.sha256 == hashlib.sha256(index.path(entry).read_bytes()).hexdigest()
     assert sorted(p.name for p in (tmp_path / "tiles").iterdir()) == sorted(
         [e.file for e in index.tiles] + ["index.json", AUTOWARE_METADATA_FILE]
     )
@@ -293,6 +295,11 @@ def test_many_tiles_with_parallel_writers_bit_for_bit(tmp_path, jobs, memory_mb)
     assert sorted(p.name for p in (tmp_path / "tiles").iterdir()) == sorted(
         [e.file for e in result.index.tiles] + ["index.json", AUTOWARE_METADATA_FILE]
     )
+    # Each writer hashed its own batches into the shared table; the index names every file's digest.
+    index = load_tile_index(tmp_path / "tiles")
+    assert [e.sha256 for e in index.tiles] == [
+        hashlib.sha256(index.path(e).read_bytes()).hexdigest() for e in index.tiles
+    ]
 
 
 @pytest.fixture
@@ -383,6 +390,27 @@ def test_index_text_is_what_json_would_write(tmp_path):
         for e in expected
     ]
     assert loaded.tiles == as_entries
+
+
+def test_index_checksums_round_trip_and_a_partial_column_is_refused(tmp_path):
+    digests = [hashlib.sha256(b"a").hexdigest(), hashlib.sha256(b"b").hexdigest()]
+    table = TileTable(
+        [0, 1], [0, 0], ["1.0_1.0.pcd", "3.0_1.0.pcd"], [1, 2], [200, 212], [[0.5, 2.5]] * 3, [[0.5, 2.5]] * 3
+    )
+    table = TileTable(**{**table.__dict__, "sha256": digests})
+    write_index(tmp_path, TileIndex(2.0, [], 12, 3, 0, [], table))
+    raw = json.loads((tmp_path / "index.json").read_text())
+    assert [t["sha256"] for t in raw["tiles"]] == digests
+    assert [e.sha256 for e in load_tile_index(tmp_path).tiles] == digests
+    for bad, what in ((None, "some tiles have a sha256"), ("ABC", "not 64 lowercase hex")):
+        broken = json.loads(json.dumps(raw))
+        if bad is None:
+            del broken["tiles"][1]["sha256"]
+        else:
+            broken["tiles"][1]["sha256"] = bad
+        (tmp_path / "index.json").write_text(json.dumps(broken))
+        with pytest.raises(UserError, match=what):
+            load_tile_index(tmp_path)
 
 
 @settings(max_examples=500, deadline=None)

@@ -19,7 +19,8 @@ A tiled map directory holds one binary PCD per non-empty tile, named ``grid.tile
         {"key": [i, j], "stem": "1.0_-3.0", "file": "1.0_-3.0.pcd", "center": [cx, cy],
          "points": 1234,
          "bounds": {"min": [x, y, z], "max": [x, y, z]},   # of the tile's points [m]
-         "bytes": 15047, "data_bytes": 14808},              # file size; of which point records
+         "bytes": 15047, "data_bytes": 14808,               # file size; of which point records
+         "sha256": "9f86d0...0a08"},                        # SHA-256 of the whole file, lowercase hex
         ...
       ]
     }
@@ -27,6 +28,10 @@ A tiled map directory holds one binary PCD per non-empty tile, named ``grid.tile
 ``pointcloud_map_metadata.yaml`` is what Autoware's pointcloud_map_loader reads for partial and
 differential loading: ``x_resolution`` and ``y_resolution`` (the tile side [m]) and, per file, the
 lower-left corner ``[min_x, min_y]`` of its cell.
+
+``sha256`` lets a reader that fetches tiles from elsewhere (the HTTP map store, docs/map_store.md) check
+each file before it uses it. Indexes written before it existed have no ``sha256`` and stay readable
+(the column is then None); an index either has it on every tile or on none.
 """
 
 from __future__ import annotations
@@ -63,6 +68,7 @@ class TileEntry:
     bounds: dict[str, list[float]]
     bytes: int
     data_bytes: int
+    sha256: str | None = None  # of the file, lowercase hex; None in indexes written before checksums
 
 
 @dataclass(frozen=True)
@@ -77,6 +83,7 @@ class TileTable:
     bytes: list[int]  # file size, header included
     lower: list[list[float]]  # [x, y, z] columns of the tiles' minimum [m]
     upper: list[list[float]]  # [x, y, z] columns of the tiles' maximum [m]
+    sha256: list[str] | None = None  # SHA-256 of each file, lowercase hex; None: an index without checksums
 
     def __len__(self) -> int:
         return len(self.files)
@@ -96,13 +103,16 @@ class TileTable:
             bytes=_typed([t["bytes"] for t in tiles], int, "bytes"),
             lower=[column("min", axis) for axis in range(3)],
             upper=[column("max", axis) for axis in range(3)],
+            sha256=_checksums(tiles),
         )
 
     def rows(self, grid_size: float, record_bytes: int) -> Iterator[tuple]:
         """Per tile, in key order: i, j, stem, file, cx, cy, points, min x y z, max x y z, bytes and
-        data bytes (the derived columns: stem, centre, data bytes, computed here)."""
-        columns = zip_equal(self.i, self.j, self.files, self.points, self.bytes, *self.lower, *self.upper)
-        for i, j, f, n, b, x0, y0, z0, x1, y1, z1 in columns:
+        data bytes (the derived columns: stem, centre, data bytes, computed here), then the checksum
+        (None without checksums)."""
+        sums = self.sha256 if self.sha256 is not None else itertools.repeat(None, len(self))
+        columns = zip_equal(self.i, self.j, self.files, self.points, self.bytes, *self.lower, *self.upper, sums)
+        for i, j, f, n, b, x0, y0, z0, x1, y1, z1, digest in columns:
             yield (
                 i,
                 j,
@@ -119,6 +129,7 @@ class TileTable:
                 z1,
                 b,
                 n * record_bytes,
+                digest,
             )
 
     def json_parts(self, grid_size: float, record_bytes: int) -> Iterator[bytes]:
@@ -133,11 +144,17 @@ class TileTable:
             text = ",".join(
                 f'{{"key":[{i},{j}],"stem":"{stem}","file":"{f}","center":[{cx!r},{cy!r}],"points":{n},'
                 f'"bounds":{{"min":[{x0!r},{y0!r},{z0!r}],"max":[{x1!r},{y1!r},{z1!r}]}},'
-                f'"bytes":{b},"data_bytes":{data}}}'
-                for i, j, stem, f, cx, cy, n, x0, y0, z0, x1, y1, z1, b, data in itertools.islice(rows, JSON_BATCH)
+                f'"bytes":{b},"data_bytes":{data}{_sha256_member(digest)}}}'
+                for i, j, stem, f, cx, cy, n, x0, y0, z0, x1, y1, z1, b, data, digest in itertools.islice(
+                    rows, JSON_BATCH
+                )
             )
             yield (b"," if start else b"") + text.encode()
         yield b"]"
+
+
+def _sha256_member(digest: str | None) -> str:
+    return "" if digest is None else f',"sha256":"{digest}"'
 
 
 def _typed(values: list, kind: type | tuple[type, ...], what: str) -> list:
@@ -146,6 +163,20 @@ def _typed(values: list, kind: type | tuple[type, ...], what: str) -> list:
         if not isinstance(v, kind) or isinstance(v, bool):
             raise TypeError(f"tile {what} {v!r} has the wrong type")
     return values
+
+
+def _checksums(tiles: list[dict]) -> list[str] | None:
+    """The ``sha256`` column: None when no tile has one (an index written before checksums); ValueError
+    when only some have one, TypeError when one is not 64 lowercase hex digits."""
+    sums = [t.get("sha256") for t in tiles]
+    if all(d is None for d in sums):
+        return None
+    if any(d is None for d in sums):
+        raise ValueError("some tiles have a sha256 and others have none")
+    for d in sums:
+        if not (isinstance(d, str) and len(d) == 64 and all(c in "0123456789abcdef" for c in d)):
+            raise TypeError(f"tile sha256 {d!r} is not 64 lowercase hex digits")
+    return sums
 
 
 @dataclass
@@ -173,8 +204,9 @@ class TileIndex:
                 bounds={"min": [x0, y0, z0], "max": [x1, y1, z1]},
                 bytes=b,
                 data_bytes=data,
+                sha256=digest,
             )
-            for i, j, stem, f, cx, cy, n, x0, y0, z0, x1, y1, z1, b, data in self.table.rows(
+            for i, j, stem, f, cx, cy, n, x0, y0, z0, x1, y1, z1, b, data, digest in self.table.rows(
                 self.grid_size, self.record_bytes
             )
         ]

@@ -4,9 +4,11 @@ Input PCDs are read chunk by chunk; each chunk is sorted by tile (grouping.py, i
 ``jobs`` threads while the next is read (parallel.map_ahead) and buffered; when the buffer passes its
 share of the memory budget it is spilled to per-tile files (buffer.py). At the end every tile is
 written once as a binary PCD with the input's fields and types (tile_files.py: one open, writev and
-close per tile in C++, by ``jobs`` forked writers taking batches of tiles from a shared queue), while
-this process writes ``index.json`` and Autoware's ``pointcloud_map_metadata.yaml`` (index.py) and then
-flushes what the writers have written so far, again and again until they finish. All of it goes into a
+close per tile in C++, by ``jobs`` forked writers taking batches of tiles from a shared queue; each writer
+hashes the files of its batch, still in the page cache, into a shared table of SHA-256 digests), while
+this process builds the index and writes Autoware's ``pointcloud_map_metadata.yaml`` (index.py) and then
+flushes what the writers have written so far, again and again until they finish; ``index.json``, which
+holds the digests, is written last. All of it goes into a
 temporary directory that is flushed to disk with a last syncfs and then replaces OUT_DIR
 (atomic.atomic_directory).
 
@@ -17,6 +19,8 @@ proportional to the map's area, not its point count)."""
 from __future__ import annotations
 
 import functools
+import hashlib
+import mmap
 import os
 import sys
 import time
@@ -41,6 +45,8 @@ _CHUNK_SHARE = 0.30
 _BUFFER_SHARE = 0.55
 _CHUNK_OVERHEAD_BYTES = 128  # per point while grouping a chunk: keys, counts and up to a group row each
 MIN_TILES_TO_FORK = 2000  # below this a fork costs more than it saves
+_DIGEST_BYTES = 32  # SHA-256
+_HASH_BLOCK = 1 << 20
 
 
 @dataclass
@@ -106,15 +112,20 @@ def tile_map(inputs: Sequence[str | os.PathLike], out_dir: str | os.PathLike, co
         # Flushing what the writers have written so far, again and again while they run, overlaps the
         # writeback with them (on the other core), so the last syncfs has only the last files to do.
         flush = functools.partial(sync_filesystem, tmp) if config.sync else None
+        # MAP_SHARED and anonymous: what the forked writers store here, the parent reads.
+        digests = mmap.mmap(-1, max(1, len(tiles) * _DIGEST_BYTES))
         with SharedBatches(len(tiles)) as batches:
             writer_jobs = [
-                functools.partial(_write_tile_files, tiles, s, writer, batches, show and k == 0, writers)
+                functools.partial(_write_tile_files, tiles, s, writer, batches, show and k == 0, writers, digests)
                 for k in range(writers)
             ]
             with in_background(writer_jobs, fork=fork, while_waiting=flush):
                 index = _tile_index(s, headers[0], read, tiles, _tile_names(tiles, s, range(len(tiles))), header)
-                write_index(tmp, index)
                 write_autoware_metadata(tmp, index)
+        raw = bytes(digests)
+        digests.close()
+        index.table.sha256.extend(raw[k * _DIGEST_BYTES : (k + 1) * _DIGEST_BYTES].hex() for k in range(len(tiles)))
+        write_index(tmp, index)
         if buffer.spill_dir.exists():
             buffer.spill_dir.rmdir()
         written = time.perf_counter()
@@ -154,18 +165,34 @@ def _write_tile_files(
     batches: SharedBatches,
     show: bool,
     writers: int,
+    digests: mmap.mmap,
 ) -> None:
     """Creates the tile files of the batches it takes (in a directory that is itself atomic, so files
-    are written in place)."""
+    are written in place) and stores the SHA-256 of each in ``digests`` (32 bytes at 32 x its number)."""
     dir_fd = os.open(writer.directory, os.O_RDONLY | os.O_DIRECTORY)  # names resolve relative to it
     try:
         share = len(tiles) // writers  # about what each writer takes
         with _progress(show, total=share, desc=f"writing tiles (writer 1 of {writers})", unit="tile") as bar:
             for which in batches:
-                writer.write(dir_fd, which, _tile_names(tiles, s, which))
+                names = _tile_names(tiles, s, which)
+                writer.write(dir_fd, which, names)
+                for k, name in zip_equal(which, names):
+                    digests[k * _DIGEST_BYTES : (k + 1) * _DIGEST_BYTES] = _file_sha256(dir_fd, name)
                 bar.update(len(which))
     finally:
         os.close(dir_fd)
+
+
+def _file_sha256(dir_fd: int, name: str) -> bytes:
+    """SHA-256 of file ``name`` in the directory open as ``dir_fd`` (just written: read from the page cache)."""
+    fd = os.open(name, os.O_RDONLY, dir_fd=dir_fd)
+    try:
+        digest = hashlib.sha256()
+        while block := os.read(fd, _HASH_BLOCK):
+            digest.update(block)
+        return digest.digest()
+    finally:
+        os.close(fd)
 
 
 def _tile_names(tiles: TileSet, s: float, which: range) -> list[str]:
@@ -211,6 +238,7 @@ def _tile_index(
             bytes=(tile_header.sizes(counts) + counts * record).tolist(),
             lower=stats["min"].T.tolist(),
             upper=stats["max"].T.tolist(),
+            sha256=[],  # filled once the writers have hashed their files
         ),
     )
 
