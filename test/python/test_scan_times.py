@@ -1,5 +1,6 @@
-"""The per-scan time table the experiment's recorder writes: round trip, summary against numpy's closed
-forms, clear errors for files that are not such a table, and the report's Time-per-scan section."""
+"""The per-scan time table the experiment's recorder writes: round trip, summary against closed forms, the
+accepted matches, tables without that column, clear errors for files that are not such a table, and the report's
+Time-per-scan section."""
 
 from __future__ import annotations
 
@@ -7,23 +8,38 @@ import numpy as np
 import pytest
 
 from grid_puzzle_localization.errors import UserError
-from grid_puzzle_localization.evaluation.scan_times import read_scan_times, summarize_scan_times, write_scan_times
+from grid_puzzle_localization.evaluation.scan_times import (
+    accepted_stamps,
+    read_scan_times,
+    summarize_scan_times,
+    write_scan_times,
+)
 from grid_puzzle_localization.report.markdown import scan_time_table
 
 
 def test_round_trip_and_summary(tmp_path):
+    # Scan times 1, 2, ..., 100 ms in shuffled order: mean and median 50.5; the q-th percentile, interpolated
+    # linearly between order statistics, is 1 + 99 q / 100 (95.05 and 99.01); the maximum 100.
     rng = np.random.default_rng(4)
-    rows = [(1700000000.0 + 0.1 * i, float(s), float(s) * 0.6) for i, s in enumerate(rng.uniform(5, 40, 200))]
+    ms = rng.permutation(np.arange(1, 101)).astype(float)
+    rows = [(1700000000.0 + 0.1 * i, s, 0.6 * s, i % 3 != 0) for i, s in enumerate(ms)]
     path = tmp_path / "scan_times.csv"
     write_scan_times(path, rows)
     data = read_scan_times(path)
-    np.testing.assert_allclose(data, np.array(rows), atol=1e-4)
+    np.testing.assert_allclose(data, np.array(rows, dtype=float), atol=1e-4)
     summary = summarize_scan_times(data)
-    times = np.array([r[1] for r in rows])
-    assert summary["scans"] == 200
-    assert summary["mean"] == pytest.approx(times.mean(), abs=1e-3)
-    assert summary["median"] == pytest.approx(np.median(times), abs=1e-3)
-    assert summary["p95"] == pytest.approx(np.percentile(times, 95), abs=1e-3)
+    assert summary == pytest.approx(
+        {"scans": 100, "mean": 50.5, "median": 50.5, "p95": 95.05, "p99": 99.01, "max": 100}
+    )
+    np.testing.assert_allclose(accepted_stamps(data), [r[0] for r in rows if r[3]], atol=1e-6)
+
+
+def test_a_table_without_the_accepted_column_is_read_and_says_nothing_of_it(tmp_path):
+    (tmp_path / "t.csv").write_text("stamp_s,scan_time_ms,align_time_ms\n1.5,20,10\n1.7,30,12\n")
+    data = read_scan_times(tmp_path / "t.csv")
+    np.testing.assert_array_equal(data[:, :3], [[1.5, 20, 10], [1.7, 30, 12]])
+    assert np.isnan(data[:, 3]).all() and accepted_stamps(data) is None
+    assert summarize_scan_times(data)["max"] == 30
 
 
 def test_an_empty_run_has_no_figures(tmp_path):
@@ -33,6 +49,8 @@ def test_an_empty_run_has_no_figures(tmp_path):
         "mean": None,
         "median": None,
         "p95": None,
+        "p99": None,
+        "max": None,
     }
 
 
@@ -41,7 +59,8 @@ def test_an_empty_run_has_no_figures(tmp_path):
     [
         ("t,a,b\n1,2,3\n", "not a scan-time table"),
         ("stamp_s,scan_time_ms,align_time_ms\n1,2\n", "t.csv"),
-        ("stamp_s,scan_time_ms,align_time_ms\n1,x,3\n", "not three numbers"),
+        ("stamp_s,scan_time_ms,align_time_ms\n1,x,3\n", "not 3 numbers"),
+        ("stamp_s,scan_time_ms,align_time_ms,match_accepted\n1,2,3\n", "expected 4"),
     ],
 )
 def test_bad_files_are_named(tmp_path, text, message):
@@ -59,11 +78,13 @@ def test_report_table_lists_each_mode_with_its_fusion():
     summary = {
         "scenario": {"fusion": "sliding_window"},
         "modes": {
-            "global": {"scan_time_ms": {"scans": 10, "mean": 12.25, "median": 11.0, "p95": 20.0}},
+            "global": {
+                "scan_time_ms": {"scans": 10, "mean": 12.25, "median": 11.0, "p95": 20.0, "p99": 24.5, "max": 25.0}
+            },
             "grid_puzzle": {"scan_time_ms": None},
         },
     }
     lines = scan_time_table(summary)
-    assert lines[2] == "| global map | sliding_window | 10 | 12.2 | 11.0 | 20.0 |"
+    assert lines[2] == "| global map | sliding_window | 10 | 12.2 | 11.0 | 20.0 | 24.5 | 25.0 |"
     assert len(lines) == 3
     assert scan_time_table({"scenario": {}, "modes": {"global": {}}}) == ["No per-scan times were recorded."]

@@ -21,6 +21,7 @@ from grid_puzzle_localization.experiment.maps import ensure_blocks, ensure_subma
 from grid_puzzle_localization.experiment.modes import DEFAULT_MODES, MODES
 from grid_puzzle_localization.experiment.runner import run_experiment
 from grid_puzzle_localization.experiment.scenario import read_scenario
+from grid_puzzle_localization.experiment.start import START_MODES, StartSetting
 from grid_puzzle_localization.report.markdown import printed_tables
 
 
@@ -71,6 +72,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--initial-pose", type=float, nargs=6, metavar=("X", "Y", "Z", "ROLL", "PITCH", "YAW"),
         help="start pose [m, rad] (default: the first ground-truth pose)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--start", choices=START_MODES, default=StartSetting.mode,
+        help="pose: the start pose as initial pose; hint: no pose, a coarse position on initialpose_hint (the start "
+        "position offset by --hint-sigma); none: neither, the localizer's global search finds itself "
+        "(default %(default)s)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--hint-sigma", type=float, default=StartSetting.hint_sigma_m,
+        help="--start hint: standard deviation of the hint's offset in x and in y [m] (default %(default)s)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--start-offset", type=float, nargs=2, metavar=("METRES", "DEGREES"),
+        help="--start pose: move the start pose this far in a seeded random direction and turn its yaw by this "
+        "angle (a wrong start)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--seed", type=int, default=StartSetting.seed,
+        help="seed of the offset's direction and of the hint (default %(default)s)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--global-search-timeout", type=float,
+        help="[s] the localizer's global_localization/auto_start_timeout: search this long after the first scan "
+        "without a pose (default: the localizer's, 0 = never, with --start pose; "
+        f"{ExperimentConfig.start_search_timeout_s:g} with hint and none)",
     )  # fmt: skip
     parser.add_argument(
         "--settle", type=float, default=ExperimentConfig.settle_s,
@@ -129,6 +155,14 @@ def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
         ndt_threads=args.ndt_threads,
         fusion=args.fusion,
         initial_pose=list(args.initial_pose) if args.initial_pose else None,
+        start=StartSetting(
+            mode=args.start,
+            hint_sigma_m=args.hint_sigma,
+            offset_m=args.start_offset[0] if args.start_offset else 0.0,
+            offset_deg=args.start_offset[1] if args.start_offset else 0.0,
+            seed=args.seed,
+        ),
+        global_search_timeout_s=args.global_search_timeout,
         roles=NodeRoles(args.localizer_node, args.provider_node, args.block_server_node),
         scenario_name=scenario.name if scenario else "custom",
     )

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from grid_puzzle_localization.evaluation.first_pose import start_figures
 from grid_puzzle_localization.evaluation.metrics import PairedErrors, interpolated_errors, paired_errors
 from grid_puzzle_localization.evaluation.paper import PAPER_FIGURES
 from grid_puzzle_localization.evaluation.resources import (
@@ -17,7 +18,7 @@ from grid_puzzle_localization.evaluation.resources import (
     map_memory_ratios,
     mode_resources,
 )
-from grid_puzzle_localization.evaluation.scan_times import summarize_scan_times
+from grid_puzzle_localization.evaluation.scan_times import accepted_stamps, summarize_scan_times
 from grid_puzzle_localization.evaluation.trajectory import Trajectory
 from grid_puzzle_localization.monitor.log import MonitorLog
 
@@ -33,7 +34,7 @@ class ModeRun:
     trajectory: Trajectory
     monitor: MonitorLog
     roles: Mapping[str, str]
-    scan_times: np.ndarray | None = None  # (n, 3) rows of evaluation.scan_times, when recorded
+    scan_times: np.ndarray | None = None  # (n, 4) rows of evaluation.scan_times, when recorded
     empty_map: MonitorLog | None = None  # the monitor log of the same launch against an empty map, when run
 
 
@@ -50,14 +51,18 @@ def summarize_experiment(
     storage: Mapping | None,
     max_diff_s: float,
     scenario: Mapping,
+    start: Mapping | None = None,
+    first_scan_stamp_s: float | None = None,
 ) -> dict:
     """The summary dictionary: per-mode resources (both protocols), map memory (when an empty-map run was
-    made) and APE, the paper's RMSE between the baseline (global) and every other mode, reductions and map
-    memory ratios against the baseline, storage, and the paper's figures."""
+    made), APE and the start (when the first played scan's stamp is known: evaluation.first_pose), the paper's
+    RMSE between the baseline (global) and every other mode, reductions and map memory ratios against the
+    baseline, storage, and the paper's figures. ``start`` is what the localizer was given (experiment.start)."""
     modes = {}
     for run in runs:
         memory = None if run.empty_map is None else map_memory(run.mode, run.roles, run.monitor, run.empty_map)
         ape = None if ground_truth is None else interpolated_errors(ground_truth, run.trajectory, max_diff_s)
+        accepted = None if run.scan_times is None else accepted_stamps(run.scan_times)
         modes[run.mode] = {
             "poses": len(run.trajectory),
             "duration_s": float(run.trajectory.t[-1] - run.trajectory.t[0]) if len(run.trajectory) else 0.0,
@@ -66,6 +71,7 @@ def summarize_experiment(
             "ape": None if ape is None else _errors(ape),
             "events": [dataclasses.asdict(e) for e in run.monitor.events],
             "scan_time_ms": None if run.scan_times is None else summarize_scan_times(run.scan_times),
+            "start": start_figures(run.trajectory, first_scan_stamp_s, ground_truth, accepted, max_diff_s),
             "map_memory": memory,
         }
     by_mode = {run.mode: run for run in runs}
@@ -80,6 +86,7 @@ def summarize_experiment(
     return {
         "scenario": dict(scenario),
         "max_time_diff_s": max_diff_s,
+        "start": None if start is None else dict(start),
         "baseline_mode": BASELINE_MODE,
         "modes": modes,
         "between_modes": between,

@@ -8,6 +8,7 @@ from pathlib import Path
 from grid_puzzle_localization.blocks.builder import BlockConfig
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.experiment.modes import DEFAULT_MODES, MODES
+from grid_puzzle_localization.experiment.start import START_MODES, StartSetting
 from grid_puzzle_localization.provider.window import PRESETS as PAPER_WINDOWS
 
 FUSIONS = ("none", "sliding_window", "auto")  # the localizer's fusion/mode
@@ -63,6 +64,13 @@ class ExperimentConfig:
     ndt_threads: int | None = None  # OpenMP threads of the NDT, 0 = all cores; None: the localizer's default
     fusion: str | None = None  # FUSIONS: pose tracking past the NDT match; None: the localizer's default
     initial_pose: list[float] | None = None  # x y z roll pitch yaw [m, rad]; None: first ground-truth pose
+    start: StartSetting = field(default_factory=StartSetting)  # what the localizer is given (experiment.start)
+    # [s] the localizer's global_localization/auto_start_timeout; None: the localizer's own (0, never) with a start
+    # pose, and start_search_timeout_s without one (hint, none), as the localizer would otherwise never search
+    global_search_timeout_s: float | None = None
+    start_search_timeout_s: float = 1.0
+    # Where the hint is published: the localizer subscribes to initialpose_hint (relative), as the providers do.
+    hint_topic: str = "initialpose_hint"
     roles: NodeRoles = field(default_factory=NodeRoles)
     launch_file: str = "localization.launch"  # of this package, or an absolute path
     localizer_status_topic: str = "/ndt_localizer/status"  # the localizer nodelet's NdtStatus (per-scan times)
@@ -94,7 +102,30 @@ class ExperimentConfig:
             raise UserError(f"--empty-map-seconds must be >= 0 (got {self.empty_map_s})")
         if not self.block_size_m > 0:
             raise UserError(f"--block-size must be > 0 m (got {self.block_size_m})")
-        if self.initial_pose is None and self.ground_truth is None:
-            raise UserError("without ground truth, give the start pose: --initial-pose X Y Z ROLL PITCH YAW")
+        if self.initial_pose is None and self.ground_truth is None and self.start.mode != "none":
+            raise UserError(
+                "without ground truth, give the start pose: --initial-pose X Y Z ROLL PITCH YAW (or --start none)"
+            )
         if self.initial_pose is not None and len(self.initial_pose) != 6:
             raise UserError(f"--initial-pose needs 6 numbers x y z roll pitch yaw (got {self.initial_pose})")
+        start = self.start
+        if start.mode not in START_MODES:
+            raise UserError(f"unknown start '{start.mode}' (use --start {' | '.join(START_MODES)})")
+        if start.mode != "pose" and (start.offset_m or start.offset_deg):
+            raise UserError(f"--start-offset moves the start pose: use it with --start pose (got --start {start.mode})")
+        if not start.offset_m >= 0:
+            raise UserError(f"--start-offset: the distance must be >= 0 m (got {start.offset_m})")
+        if not start.hint_sigma_m >= 0:
+            raise UserError(f"--hint-sigma must be >= 0 m (got {start.hint_sigma_m})")
+        if start.mode != "pose" and "block_map" in self.modes:
+            raise UserError(f"block_map mode starts its block server from a pose: use --start pose (got {start.mode})")
+        if self.global_search_timeout_s is not None and not self.global_search_timeout_s >= 0:
+            raise UserError(f"--global-search-timeout must be >= 0 s, 0 = never (got {self.global_search_timeout_s})")
+        if start.mode != "pose" and self.global_search_timeout_s == 0:
+            raise UserError(f"--start {start.mode} gives no pose: the localizer needs --global-search-timeout > 0")
+
+    def search_timeout_s(self) -> float | None:
+        """The localizer's global_localization/auto_start_timeout for this run; None: its own default."""
+        if self.global_search_timeout_s is not None:
+            return self.global_search_timeout_s
+        return None if self.start.mode == "pose" else self.start_search_timeout_s

@@ -4,7 +4,9 @@ shutdown; then the evaluation report."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import os
 import shutil
 import sys
 import tempfile
@@ -12,7 +14,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import numpy as np
+import rosbag
 from scipy.spatial.transform import Rotation
 
 from grid_puzzle_localization.errors import UserError
@@ -22,6 +24,7 @@ from grid_puzzle_localization.experiment.maps import write_empty_map
 from grid_puzzle_localization.experiment.modes import EMPTY_MAP_MODES, GRID_PUZZLE_MODES, LAUNCH_MODES
 from grid_puzzle_localization.experiment.processes import ManagedProcess, wait_for
 from grid_puzzle_localization.experiment.ros_stack import RosCore, rosbag_play, roslaunch, run_node
+from grid_puzzle_localization.experiment.start import Start, start_from
 from grid_puzzle_localization.monitor.log import write_csv
 from grid_puzzle_localization.monitor.sampler import Monitor
 from grid_puzzle_localization.monitor.stats import summarize
@@ -58,18 +61,31 @@ def initial_pose_from(trajectory_path: Path) -> list[float]:
     return [*map(float, gt.xyz[0]), float(roll), float(pitch), float(yaw)]
 
 
+def first_scan_stamp(bag: str | os.PathLike, topic: str = "points") -> float | None:
+    """Header stamp [s] of the first message on ``topic`` (with or without its leading slash) in ``bag``: the first
+    played scan; None when the bag holds none."""
+    with rosbag.Bag(str(bag)) as b:
+        for _, msg, _ in b.read_messages(topics=[topic.lstrip("/"), "/" + topic.lstrip("/")]):
+            return msg.header.stamp.to_sec()
+    return None
+
+
 def launch_args(
-    cfg: ExperimentConfig, mode: str, global_map: Path, tiles: Path | None, initial_pose: list[float]
+    cfg: ExperimentConfig, mode: str, global_map: Path, tiles: Path | None, initial_pose: list[float] | None
 ) -> dict[str, object]:
+    """roslaunch arguments of a mode; ``initial_pose`` None: the localizer gets none."""
     launch = LAUNCH_MODES[mode]
+    pose = [] if initial_pose is None else initial_pose
     args: dict[str, object] = {
         "mode": launch.mode,
         "use_sim_time": "true",
-        "initial_pose": "[" + ", ".join(f"{v:.9g}" for v in initial_pose) + "]",
+        "initial_pose": "[" + ", ".join(f"{v:.9g}" for v in pose) + "]",
         "map": global_map.resolve(),
         "n": cfg.window.n,
         "k": cfg.window.k,
     }
+    if cfg.search_timeout_s() is not None:  # else the localizer's own default
+        args["global_search_timeout"] = cfg.search_timeout_s()
     if cfg.ndt_threads is not None:  # else the localizer's own default
         args["ndt_threads"] = cfg.ndt_threads
     if cfg.fusion is not None:  # else the localizer's own default
@@ -118,17 +134,27 @@ def _stop_all(processes: list[ManagedProcess]) -> tuple[list[int], list[int]]:
     return killed, stray
 
 
-def start_recorder(cfg: ExperimentConfig, core: RosCore, out: Path, initial_pose: list[float]) -> ManagedProcess:
-    """The trajectory recorder node, subscribed to odom and publishing the initial pose (latched)."""
-    x, y, z, roll, pitch, yaw = initial_pose
-    pose = [x, y, z, *map(float, Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_quat())]
+def recorder_args(cfg: ExperimentConfig, out: Path, start: Start) -> list[str]:
+    """The trajectory recorder's arguments: its outputs, and what it publishes, latched, for the start: the initial
+    pose on initialpose, or the hint on cfg.hint_topic (which the localizer and the provider both receive)."""
     argv = [
         f"__name:={cfg.roles.recorder.lstrip('/')}",
         f"_output:={(out / TRAJECTORY).resolve()}",
         f"_scan_times:={(out / SCAN_TIMES).resolve()}",
-        f"_initial_pose:={pose}",
         f"status:={cfg.localizer_status_topic}",
     ]
+    if start.initial_pose is not None:
+        x, y, z, roll, pitch, yaw = start.initial_pose
+        pose = [x, y, z, *map(float, Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_quat())]
+        argv.append(f"_initial_pose:={pose}")
+    if start.hint_xy is not None:
+        argv += [f"_hint:={[*start.hint_xy, start.hint_sigma_m]}", f"initialpose_hint:={cfg.hint_topic}"]
+    return argv
+
+
+def start_recorder(cfg: ExperimentConfig, core: RosCore, out: Path, start: Start) -> ManagedProcess:
+    """The trajectory recorder node, subscribed to odom and publishing the start (recorder_args)."""
+    argv = recorder_args(cfg, out, start)
     recorder = run_node("trajectory_recorder", "trajectory_recorder", argv, core.env, out / "logs" / "recorder.log")
     try:
         recording = lambda: cfg.roles.recorder in core.subscribers("/odom")  # noqa: E731
@@ -160,7 +186,7 @@ class ModeInputs:
     record: bool = True  # record the trajectory (and require one)
 
 
-def run_mode(cfg: ExperimentConfig, mode: str, inputs: ModeInputs, initial_pose: list[float]) -> ModeOutcome:
+def run_mode(cfg: ExperimentConfig, mode: str, inputs: ModeInputs, start: Start) -> ModeOutcome:
     """One run of a mode, start to clean shutdown; writes OUT/{trajectory.tum, monitor.csv, monitor.json, logs}
     (the trajectory only when recording)."""
     out = inputs.out
@@ -174,14 +200,14 @@ def run_mode(cfg: ExperimentConfig, mode: str, inputs: ModeInputs, initial_pose:
         say(mode, "starting roscore and roslaunch")
         core = RosCore(out / "logs", cfg.startup_timeout_s)
         started.append(core.process)
-        args = launch_args(cfg, mode, inputs.global_map, inputs.tiles, initial_pose)
+        args = launch_args(cfg, mode, inputs.global_map, inputs.tiles, start.initial_pose)
         launch = roslaunch(cfg.launch_file, args, core.env, out / "logs" / "roslaunch.log")
         started.append(launch)
         wanted = required_nodes(cfg, mode)
         wait_for(lambda: wanted <= core.nodes(), cfg.startup_timeout_s, f"the nodes {sorted(wanted)}", launch)
         wait_for(lambda: core.subscribers("/points"), cfg.startup_timeout_s, "a subscriber of /points", launch)
         if inputs.record:
-            started.append(start_recorder(cfg, core, out, initial_pose))
+            started.append(start_recorder(cfg, core, out, start))
         time.sleep(cfg.settle_s)
         launch.remember_descendants()
         processes = sorted(core.nodes() - {"/rosout", cfg.roles.recorder})
@@ -208,27 +234,37 @@ def run_mode(cfg: ExperimentConfig, mode: str, inputs: ModeInputs, initial_pose:
     return ModeOutcome(mode, core.master_uri, roles, processes, killed, stray)
 
 
-def run_empty_map(cfg: ExperimentConfig, mode: str, initial_pose: list[float]) -> ModeOutcome:
+def run_empty_map(cfg: ExperimentConfig, mode: str, start: Start) -> ModeOutcome:
     """The mode's launch against an empty map (written to a temporary directory) for the first
     ``cfg.empty_map_s`` seconds of the bag, into OUT/<mode>/empty_map/: the floor that the report subtracts to
     get each process's map memory."""
     with tempfile.TemporaryDirectory(prefix="gpm_empty_map_") as tmp:
         global_map, tiles = write_empty_map(tmp, cfg.window.grid_size_m)
         inputs = ModeInputs(global_map, tiles, cfg.out_dir / mode / EMPTY_MAP_DIR, cfg.empty_map_s, record=False)
-        return run_mode(cfg, mode, inputs, initial_pose)
+        return run_mode(cfg, mode, inputs, start)
 
 
 def run_experiment(cfg: ExperimentConfig, tiles: Path | None, storage: dict | None) -> dict:
     """Every mode in turn, then the report. Returns the summary."""
     cfg.check()
     cfg.out_dir.mkdir(parents=True, exist_ok=True)
-    initial_pose = cfg.initial_pose if cfg.initial_pose is not None else initial_pose_from(cfg.ground_truth)
+    # Where the run really starts; the localizer is given it, moved, a hint near it, or nothing (cfg.start).
+    true_start = cfg.initial_pose if cfg.initial_pose is not None else None
+    if true_start is None and cfg.ground_truth is not None:
+        true_start = initial_pose_from(cfg.ground_truth)
+    start = start_from(cfg.start, true_start)
+    if start.initial_pose is not None:
+        say("start", "initial pose " + " ".join(f"{v:.3f}" for v in start.initial_pose))
+    elif start.hint_xy is not None:
+        say("start", f"no pose; hint ({start.hint_xy[0]:.2f}, {start.hint_xy[1]:.2f}) on {cfg.hint_topic}")
+    else:
+        say("start", "no pose and no hint: the localizer's global search")
     outcomes = []
     for mode in cfg.modes:
         inputs = ModeInputs(cfg.global_map, tiles if mode in GRID_PUZZLE_MODES else None, cfg.out_dir / mode)
-        outcomes.append(run_mode(cfg, mode, inputs, initial_pose))
+        outcomes.append(run_mode(cfg, mode, inputs, start))
         if cfg.empty_map_s > 0 and mode in EMPTY_MAP_MODES:
-            outcomes.append(run_empty_map(cfg, mode, initial_pose))
+            outcomes.append(run_empty_map(cfg, mode, start))
     scenario = {
         "name": cfg.scenario_name,
         "preset": cfg.preset,
@@ -249,7 +285,18 @@ def run_experiment(cfg: ExperimentConfig, tiles: Path | None, storage: dict | No
         global_map=str(cfg.global_map.resolve()),
         storage=storage,
         max_diff_s=cfg.max_time_diff_s,
-        extra={"outcomes": [asdict(o) for o in outcomes], "initial_pose": list(np.asarray(initial_pose, float))},
+        extra={
+            "outcomes": [asdict(o) for o in outcomes],
+            "initial_pose": start.initial_pose,
+            "start": {
+                **dataclasses.asdict(cfg.start),
+                **start.as_dict(),
+                "true_start_pose": None if true_start is None else [float(v) for v in true_start],
+                "global_search_timeout_s": cfg.search_timeout_s(),
+                "hint_topic": cfg.hint_topic,
+            },
+            "first_scan_stamp_s": first_scan_stamp(cfg.bag),
+        },
     )
     write_run_info(cfg.out_dir, info)
     summary = build_report(cfg.out_dir)

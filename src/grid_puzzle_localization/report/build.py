@@ -1,6 +1,7 @@
 """Builds summary.json, report.md and plots/ from an experiment directory:
 
-OUT/run.json                    scenario, modes, roles per mode, ground truth and map paths, storage figures
+OUT/run.json                    scenario, modes, roles per mode, ground truth and map paths, storage figures,
+                                the start and the first played scan's stamp (extra)
 OUT/<mode>/trajectory.tum       the localizer's odometry (TUM)
 OUT/<mode>/monitor.csv, .json   the resource monitor's samples and summary (with events)
 OUT/<mode>/scan_times.csv       the localizer's per-scan times (optional)
@@ -93,7 +94,8 @@ def build_report(out_dir: str | os.PathLike) -> dict:
     info = read_run_info(out)
     runs = [load_mode(out, mode, info.roles.get(mode, {})) for mode in info.modes]
     gt = read_tum(info.ground_truth) if info.ground_truth else None
-    summary = summarize_experiment(runs, gt, info.storage, info.max_diff_s, info.scenario)
+    start, first_scan = info.extra.get("start"), info.extra.get("first_scan_stamp_s")
+    summary = summarize_experiment(runs, gt, info.storage, info.max_diff_s, info.scenario, start, first_scan)
     write_json(out / "summary.json", summary)
     with atomic_write(out / "report.md") as f:
         f.write(render_report(summary))

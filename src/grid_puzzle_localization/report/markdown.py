@@ -166,15 +166,58 @@ def scan_time_table(summary: Mapping) -> list[str]:
         return ["No per-scan times were recorded."]
     fusion = summary["scenario"].get("fusion", "–")
     lines = [
-        "| mode | fusion | scans | mean [ms] | median [ms] | p95 [ms] |",
-        "|---|---|---:|---:|---:|---:|",
+        "| mode | fusion | scans | mean [ms] | median [ms] | p95 [ms] | p99 [ms] | max [ms] |",
+        "|---|---|---:|---:|---:|---:|---:|---:|",
     ]
     for mode, t in rows:
         if t:
             lines.append(
                 f"| {mode_title(mode)} | {fusion} | {t['scans']} | {num(t['mean'])} "
-                f"| {num(t['median'])} | {num(t['p95'])} |"
+                f"| {num(t['median'])} | {num(t.get('p95'))} | {num(t.get('p99'))} | {num(t.get('max'))} |"
             )
+    return lines
+
+
+def start_setting(start: Mapping | None) -> str:
+    """What the localizer was given at the start, in words."""
+    if not start:
+        return "the start pose (initial_pose and initialpose)"
+    mode = start.get("mode")
+    if mode == "hint":
+        x, y = start["hint_xy"]
+        return f"no pose; a hint at ({x:.1f}, {y:.1f}) m (sigma {start['hint_sigma_m']:g} m) on initialpose_hint"
+    if mode == "none":
+        return "no pose and no hint: the localizer's global search over its map"
+    text = "the start pose (initial_pose and initialpose)"
+    if start.get("offset_m") or start.get("offset_deg"):
+        text += f", moved {start['offset_m']:g} m and turned {start['offset_deg']:g} deg from the first reference pose"
+    return text
+
+
+def start_table(summary: Mapping) -> list[str]:
+    """Per mode: the first published pose and the first from an accepted match, after the first played scan, with
+    their errors then."""
+    rows = [(mode, m.get("start")) for mode, m in summary["modes"].items()]
+    if not any(s for _, s in rows):
+        return ["The first played scan's stamp was not recorded: no start figures."]
+
+    def cells(pose: Mapping | None) -> str:
+        if pose is None:
+            return "never | – | –"
+        after, error = num(pose["after_s"], ".2f"), num(pose["translation_error_m"], ".2f")
+        return f"{after} | {error} | {num(pose['yaw_error_deg'])}"
+
+    lines = [
+        f"Start: {start_setting(summary.get('start'))}.",
+        "",
+        "| mode | first pose after [s] | its error [m] | its yaw error [deg] "
+        "| first accepted pose after [s] | its error [m] | its yaw error [deg] |",
+        "|---|---:|---:|---:|---:|---:|---:|",
+    ]
+    for mode, s in rows:
+        if s:
+            accepted = cells(s["first_accepted_pose"]) if "first_accepted_pose" in s else "– | – | –"
+            lines.append(f"| {mode_title(mode)} | {cells(s['first_pose'])} | {accepted} |")
     return lines
 
 
@@ -273,6 +316,15 @@ def render_report(summary: Mapping) -> str:
         f"nearest pose of the other within {summary['max_time_diff_s']} s, as evo does. No alignment is applied",
         '(all trajectories are in the map frame). "global map run" is the paper\'s figure: the grid puzzle',
         "trajectory against the global map trajectory.",
+        "",
+        "## Start",
+        "",
+        *start_table(summary),
+        "",
+        "Times are bag time from the first played scan's stamp. The first pose is the first one published (with a",
+        "start pose, the localizer may publish its prediction from it before a match is accepted); the first",
+        "accepted pose is the first published for a scan whose match the localizer accepted (its ~status). Errors",
+        "are against the reference at that pose's stamp: position, and yaw alone.",
         "",
         "## Time per scan",
         "",

@@ -1,10 +1,12 @@
 """Node that records an Odometry topic as a TUM trajectory, written when the node shuts down.
 
 Subscribes: ``odom`` (nav_msgs/Odometry) and, when ``~scan_times`` (a CSV path) is set, ``status`` (the
-localizer's NdtStatus, for its per-scan times). Parameters: ``~output`` (path of the TUM file).
-Optionally publishes ``~initial_pose`` (7 numbers x y z qx qy qz qw in ``~frame_id``, default
-``map``) once and latched on ``initialpose`` (geometry_msgs/PoseWithCovarianceStamped), which is how
-the experiment seeds the localizer and the map provider. Poses whose stamp does not increase (a bag
+localizer's NdtStatus, for its per-scan times and whether each match was accepted). Parameters: ``~output``
+(path of the TUM file). Optionally publishes, once and latched (geometry_msgs/PoseWithCovarianceStamped in
+``~frame_id``, default ``map``), ``~initial_pose`` (7 numbers x y z qx qy qz qw) on ``initialpose``, which is how
+the experiment seeds the localizer and the map provider, and ``~hint`` (x, y [m] and its standard deviation
+sigma [m]) on ``initialpose_hint``, a coarse position for the localizer's global search and the provider's first
+window. Latched, each reaches a subscriber that connects later. Poses whose stamp does not increase (a bag
 restarted) are dropped and counted."""
 
 from __future__ import annotations
@@ -25,14 +27,14 @@ class TrajectoryRecorder:
         self.output = output
         self.scan_times_output = scan_times
         self.rows: list[tuple[float, ...]] = []
-        self.scan_times: list[tuple[float, float, float]] = []
+        self.scan_times: list[tuple[float, float, float, bool]] = []
         self.dropped = 0
         self.sub = rospy.Subscriber("odom", Odometry, self.on_odom, queue_size=100)
         if scan_times:
             self.status_sub = rospy.Subscriber("status", NdtStatus, self.on_status, queue_size=100)
 
     def on_status(self, msg: NdtStatus) -> None:
-        self.scan_times.append((msg.header.stamp.to_sec(), msg.scan_time_ms, msg.align_time_ms))
+        self.scan_times.append((msg.header.stamp.to_sec(), msg.scan_time_ms, msg.align_time_ms, msg.match_accepted))
 
     def on_odom(self, msg: Odometry) -> None:
         p, q = msg.pose.pose.position, msg.pose.pose.orientation
@@ -63,6 +65,20 @@ def initial_pose_message(values: list[float], frame_id: str) -> PoseWithCovarian
     return msg
 
 
+def hint_message(values: list[float], frame_id: str) -> PoseWithCovarianceStamped:
+    """A coarse position (x, y [m], sigma [m]): its covariance holds sigma^2 in x and y; z, roll, pitch and yaw are
+    unknown (variance 1e6)."""
+    if len(values) != 3 or not values[2] >= 0:
+        raise UserError(f"~hint needs 3 numbers x y sigma, sigma >= 0 m (got {values})")
+    msg = PoseWithCovarianceStamped()
+    msg.header.frame_id = frame_id
+    msg.pose.pose.position.x, msg.pose.pose.position.y = values[:2]
+    msg.pose.pose.orientation.w = 1.0
+    sigma2 = values[2] ** 2
+    msg.pose.covariance = list(np.diag([sigma2, sigma2, 1e6, 1e6, 1e6, 1e6]).ravel())
+    return msg
+
+
 def main() -> None:
     rospy.init_node("trajectory_recorder")
     output = rospy.get_param("~output")
@@ -71,5 +87,9 @@ def main() -> None:
     if initial is not None:
         pub = rospy.Publisher("initialpose", PoseWithCovarianceStamped, queue_size=1, latch=True)
         pub.publish(initial_pose_message([float(v) for v in initial], rospy.get_param("~frame_id", "map")))
+    hint = rospy.get_param("~hint", None)
+    if hint is not None:
+        hint_pub = rospy.Publisher("initialpose_hint", PoseWithCovarianceStamped, queue_size=1, latch=True)
+        hint_pub.publish(hint_message([float(v) for v in hint], rospy.get_param("~frame_id", "map")))
     rospy.on_shutdown(recorder.write)
     rospy.spin()
