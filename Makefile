@@ -147,12 +147,14 @@ reliability: fuzz-build build
 
 # ---------------------------------------------------------------- tracking on real and hard recordings
 .PHONY: experiment-real experiment-hard
-# One JSON line per variant and mode (tools/experiment_tracking.py); long-running (real-time playback), not in CI.
-# make experiment-real: MulRan Riverside02 keyframes (../shared/data/real) as recorded, 10 % dropped, with gaps.
+# One JSON line per variant and mode (tools/experiment_tracking.py, also in build/experiment_tracking/results.jsonl);
+# long-running (real-time playback), not in CI.
+# make experiment-real: KITTI-00 keyframes (../shared/data/real/kitti00_far), both stretches: as recorded, 20 %
+#   dropped with an 8 s gap, a start 20 m and 90 deg off, a hint (sigma 20 m), no start at all.
 # make experiment-hard: simulated hand-held walks (10 Hz and 2 Hz scans) and a recording with gaps.
-# VARIANTS="mulran handheld_2hz ..." runs only those.
+# VARIANTS="kitti_s1 kitti_s1_hint20 handheld_2hz ..." runs only those; TRACKING_ARGS=--cpu-hog keeps core 1 busy.
 experiment-real: build
-	@$(SETUP) python3 $(ROOT)/tools/experiment_tracking.py $(or $(VARIANTS),real)
+	@$(SETUP) python3 $(ROOT)/tools/experiment_tracking.py $(or $(VARIANTS),real) $(TRACKING_ARGS)
 
 experiment-hard: build
-	@$(SETUP) python3 $(ROOT)/tools/experiment_tracking.py $(or $(VARIANTS),hard)
+	@$(SETUP) python3 $(ROOT)/tools/experiment_tracking.py $(or $(VARIANTS),hard) $(TRACKING_ARGS)

@@ -1,133 +1,228 @@
 #!/usr/bin/env python3
-"""Tracking on the recordings that broke the localizer: `make experiment-real` and `make experiment-hard`.
+"""Tracking on real and hard recordings: `make experiment-real` and `make experiment-hard`.
 
-Real (``make experiment-real``): the MulRan Riverside02 keyframes (real Ouster OS1-64 scans from a car at about
-10 m/s, ../shared/data/real/mulran_riverside02, or $GPL_SHARED_DATA) imported with `gpm import`: scans 50-215,
-the map from every 3rd scan, the others played.
-- ``mulran``: as recorded;
-- ``mulran_drop10``: 10 % of the played scans dropped at random;
-- ``mulran_gaps``: gaps of 2, 4 and 8 s cut 15, 30 and 45 s after the first scan.
-Grid puzzle mode uses the urban preset's window (n 25, k 20, s 2 m) here: the demo window ends 17 m from the car.
-The reference poses are the FAST-LIO2 odometry (odom_poses.txt): SLAM output, not ground truth. Where
-registering consecutive scans disagrees with it (tools/reference_check.py: scans 63-99, 103-122, 152-161 and
-167-171) it is metres off, and so is the map built from it there; the figures are also given over the scans whose
-reference agrees with the scans on both sides (``trusted``). The recording itself pauses for 4.3 s and 8.5 s about
-65 s in (the car stopped, so no keyframe was saved).
+Real (``make experiment-real``): the KITTI odometry 00 keyframes of ../shared/data/real/kitti00_far (or
+$GPL_SHARED_DATA): real Velodyne HDL-64E scans of a car, about 2 m apart, with OXTS RTK GNSS/INS poses
+(decimetre-level: a reference, not SLAM output). Its two stretches (stretches.txt: lines 0-251 and 252-560 of the
+pose and time files) are each imported with `gpm import` (the map from every 3rd scan, the others played), and
+run in five variants per stretch ``s1`` and ``s2``:
+- ``kitti_s1``: as recorded, started at the first reference pose;
+- ``kitti_s1_drop20_gap8``: 20 % of the played scans dropped at random and 8 s cut in the middle of the drive;
+- ``kitti_s1_offset20_90``: started 20 m off in a seeded random direction and turned by 90 deg;
+- ``kitti_s1_hint20``: no start pose, a hint 20 m sigma from the start on initialpose_hint;
+- ``kitti_s1_none``: no start pose and no hint: the localizer's global search over its map.
+Grid puzzle mode uses the urban preset's window (n 25, k 20, s 2 m), as a car's scans reach far.
 
 Simulated (``make experiment-hard``): 60 s of the courtyard walk (scale 0.25, seed 0) from `gpm simulate`,
 - ``handheld_10hz`` and ``handheld_2hz``: hand-held, the yaw swinging +-30 deg every 0.5 s, every sweep or 2 Hz;
 - ``sim_gaps``: nothing recorded for 2, 4 and 8 s, 15, 30 and 45 s into the run;
-- ``handheld_2hz_no_imu``, ``sim_gaps_no_imu``: the same without an IMU (a LiDAR-only recording, like the
-  real hand-held one that lost track).
+- ``handheld_2hz_no_imu``, ``sim_gaps_no_imu``: the same without an IMU (a LiDAR-only recording).
 
-Each is run by `gpm experiment` in both modes; one JSON object per variant and mode is printed: the APE of the
-published poses and whether the localizer kept track (evaluation/tracking.py). Outputs go to
-build/experiment_tracking/.
+Each is run by `gpm experiment` in the global and grid puzzle modes with one NDT thread; one JSON object per
+variant and mode is printed and written to build/experiment_tracking/results.jsonl: the error of the published
+poses over all played scans (and, on kitti00_far, over the straight parts), the scans with a pose and those more
+than 1 m off, whether the localizer kept track (evaluation/tracking.py), the time to the first pose and its error
+then, and the localizer's per-scan time. ``--cpu-hog`` keeps one core busy for the whole run (a busy loop pinned
+to core 1), for the same figures on a loaded 2-core machine.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import shutil
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import rosbag
-from reference_check import cached_check
 from shared_data import SHARED_REAL_DATA
 
 from grid_puzzle_localization.evaluation.tracking import LOST_DEG, LOST_M, tracking
 from grid_puzzle_localization.evaluation.trajectory import read_tum
 from grid_puzzle_localization.experiment.scenario import read_scenario
+from grid_puzzle_localization.util.atomic import atomic_write
 
 ROOT = Path(__file__).resolve().parents[1]
-MULRAN = SHARED_REAL_DATA / "mulran_riverside02"
+KITTI = SHARED_REAL_DATA / "kitti00_far"
 GPM = [sys.executable, str(ROOT / "scripts" / "gpm")]
 MODES = ("global", "grid_puzzle")
-GAPS = ["--gap", "15", "2", "--gap", "30", "4", "--gap", "45", "8"]
-MULRAN_FIRST, MULRAN_LAST = 50, 215
-MULRAN_IMPORT = [
-    *(str(MULRAN / "Scans"), str(MULRAN / "odom_poses.txt"), "--times", str(MULRAN / "times.txt")),
-    *("--first", str(MULRAN_FIRST), "--last", str(MULRAN_LAST), "--map-every", "3"),
-]
-SIMULATE = ["courtyard", "--scale", "0.25", "--duration", "60", "--seed", "0"]
-# variant -> (gpm command and its arguments, what the reference poses are)
-VARIANTS: dict[str, tuple[list[str], str]] = {
-    "mulran": (["import", *MULRAN_IMPORT], "FAST-LIO2 odometry"),
-    "mulran_drop10": (["import", *MULRAN_IMPORT, "--drop-fraction", "0.1", "--seed", "0"], "FAST-LIO2 odometry"),
-    "mulran_gaps": (["import", *MULRAN_IMPORT, *GAPS], "FAST-LIO2 odometry"),
-    "handheld_10hz": (["simulate", *SIMULATE, "--yaw-swing"], "simulator ground truth"),
-    "handheld_2hz": (["simulate", *SIMULATE, "--yaw-swing", "--scan-rate", "2"], "simulator ground truth"),
-    "handheld_2hz_no_imu": (
-        ["simulate", *SIMULATE, "--yaw-swing", "--scan-rate", "2", "--no-imu"],
-        "simulator ground truth",
-    ),
-    "sim_gaps": (["simulate", *SIMULATE, *GAPS], "simulator ground truth"),
-    "sim_gaps_no_imu": (["simulate", *SIMULATE, *GAPS, "--no-imu"], "simulator ground truth"),
-}
-SETS = {
-    "real": ["mulran", "mulran_drop10", "mulran_gaps"],
-    "hard": ["handheld_10hz", "handheld_2hz", "handheld_2hz_no_imu", "sim_gaps", "sim_gaps_no_imu"],
-}
+CPU_HOG = ["taskset", "-c", "1", "python3", "-c", "while True: pass"]
+KITTI_REFERENCE = "OXTS RTK GNSS/INS (KITTI ground truth)"
+SIM_REFERENCE = "simulator ground truth"
+
+# kitti00_far's stretches: 0-based lines of poses_kitti.txt and times.txt (stretches.txt), and a time [s] after
+# the first played scan in the middle of each (60.5 and 69.3 s played) where the gap variant cuts 8 s.
+STRETCHES = {"s1": (0, 251, 30.0), "s2": (252, 560, 35.0)}
+
+# Sharp turns of kitti00_far (its README: keyframe numbers, i.e. scan file names). There the GNSS/INS poses and the
+# registration of consecutive scans disagree by up to 0.58 m / 4.5 deg, about 0.4-0.5 m across a whole turn, so a
+# tight error figure leaves them out, with TURN_MARGIN keyframes (about 6 m) on either side.
+SHARP_TURNS = ((777, 791), (857, 863), (913, 926), (1105, 1110), (1224, 1231))
+TURN_MARGIN = 3
 
 
-def scan_stamps(bag: Path) -> list[float]:
+def straight(keyframes: np.ndarray, turns=SHARP_TURNS, margin: int = TURN_MARGIN) -> np.ndarray:
+    """True for each keyframe number outside every sharp turn widened by ``margin`` keyframes on each side."""
+    k = np.asarray(keyframes)[:, None]
+    first, last = np.array(turns).T
+    return ~np.any((k >= first - margin) & (k <= last + margin), axis=1)
+
+
+@dataclass(frozen=True)
+class Variant:
+    scenario: str  # the directory the gpm command writes (variants that only start differently share it)
+    command: tuple[str, ...]  # gpm command and arguments that write the scenario
+    experiment: tuple[str, ...]  # extra arguments of gpm experiment
+    reference: str
+
+
+def kitti_variants(name: str, first: int, last: int, gap_at: float) -> dict[str, Variant]:
+    scans = (str(KITTI / "scans"), str(KITTI / "poses_kitti.txt"), "--times", str(KITTI / "times.txt"))
+    base = ("import", *scans, "--first", str(first), "--last", str(last), "--map-every", "3")
+    thinned = (*base, "--drop-fraction", "0.2", "--seed", "0", "--gap", f"{gap_at:g}", "8")
+    urban = ("--preset", "urban")
+    stem = f"kitti_{name}"
+    return {
+        stem: Variant(stem, base, urban, KITTI_REFERENCE),
+        f"{stem}_drop20_gap8": Variant(f"{stem}_drop20_gap8", thinned, urban, KITTI_REFERENCE),
+        f"{stem}_offset20_90": Variant(stem, base, (*urban, "--start-offset", "20", "90"), KITTI_REFERENCE),
+        f"{stem}_hint20": Variant(stem, base, (*urban, "--start", "hint", "--hint-sigma", "20"), KITTI_REFERENCE),
+        f"{stem}_none": Variant(stem, base, (*urban, "--start", "none"), KITTI_REFERENCE),
+    }
+
+
+GAPS = ("--gap", "15", "2", "--gap", "30", "4", "--gap", "45", "8")
+SIMULATE = ("simulate", "courtyard", "--scale", "0.25", "--duration", "60", "--seed", "0")
+HARD = {
+    "handheld_10hz": (*SIMULATE, "--yaw-swing"),
+    "handheld_2hz": (*SIMULATE, "--yaw-swing", "--scan-rate", "2"),
+    "handheld_2hz_no_imu": (*SIMULATE, "--yaw-swing", "--scan-rate", "2", "--no-imu"),
+    "sim_gaps": (*SIMULATE, *GAPS),
+    "sim_gaps_no_imu": (*SIMULATE, *GAPS, "--no-imu"),
+}
+VARIANTS: dict[str, Variant] = {
+    **{v: k for name, (a, b, gap) in STRETCHES.items() for v, k in kitti_variants(name, a, b, gap).items()},
+    **{name: Variant(name, command, (), SIM_REFERENCE) for name, command in HARD.items()},
+}
+SETS = {"real": [v for v in VARIANTS if v.startswith("kitti_")], "hard": list(HARD)}
+
+
+def scan_stamps(bag: Path) -> np.ndarray:
+    import rosbag  # only here: the pure functions above are tested without ROS
+
     with rosbag.Bag(str(bag)) as b:
-        return [m.header.stamp.to_sec() for _, m, _ in b.read_messages(topics=["points"])]
+        return np.array([m.header.stamp.to_sec() for _, m, _ in b.read_messages(topics=["points", "/points"])])
 
 
-def trusted_stamps() -> np.ndarray:
-    """Times [s] of the MulRan scans whose reference agrees with registration on both sides."""
-    _, trusted = cached_check(
-        MULRAN / "Scans", MULRAN / "odom_poses.txt", MULRAN_FIRST, MULRAN_LAST, ROOT / "build" / "reference_check"
-    )
-    return np.loadtxt(MULRAN / "times.txt")[sorted(trusted)]
+def kitti_keyframes(stamps: np.ndarray) -> np.ndarray:
+    """Keyframe numbers (scan file names) of the scans stamped ``stamps`` [s] (times.txt holds one time a file)."""
+    names = sorted(int(p.stem) for p in (KITTI / "scans").glob("*.pcd"))
+    times = np.loadtxt(KITTI / "times.txt")
+    nearest = np.abs(stamps[:, None] - times[None, :]).argmin(axis=1)
+    if np.any(np.abs(times[nearest] - stamps) > 1e-3):
+        raise RuntimeError(f"a played scan's stamp is not in {KITTI / 'times.txt'}")
+    return np.array(names)[nearest]
 
 
-def figures(variant: str, scenario: Path, run: Path, trusted: np.ndarray | None) -> list[dict]:
-    """One row per mode; with ``trusted`` (stamps of the scans whose reference is trusted) the figures over them too."""
+def rounded(value: float | None, digits: int = 3) -> float | None:
+    return None if value is None else round(float(value), digits)
+
+
+def figures(variant: str, scenario: Path, run: Path, hog: str | None) -> list[dict]:
+    """One row per mode."""
     summary = json.loads((run / "summary.json").read_text())
     inputs = read_scenario(scenario)
     reference = read_tum(inputs.ground_truth)
     stamps = scan_stamps(inputs.bag)
+    kept = stamps[straight(kitti_keyframes(stamps))] if variant.startswith("kitti_") else None
+    start = summary.get("start") or {}
     rows = []
     for mode in MODES:
-        ape = (summary["modes"].get(mode) or {}).get("ape") or {}
+        m = summary["modes"].get(mode) or {}
         trajectory = read_tum(run / mode / "trajectory.tum")
         track = tracking(reference, trajectory, stamps, summary["max_time_diff_s"])
-        extra = {}
-        if trusted is not None:
-            played = np.asarray(stamps)
-            kept = played[np.min(np.abs(played[:, None] - trusted[None, :]), axis=1) < 1e-3]
+        row = {
+            "variant": variant,
+            "mode": mode,
+            "reference": VARIANTS[variant].reference,
+            "start": start.get("mode"),
+            "start_offset": [start.get("offset_m"), start.get("offset_deg")] if start.get("offset_m") else None,
+            "hint_sigma_m": start.get("hint_sigma_m") if start.get("mode") == "hint" else None,
+            "cpu_hog": hog,
+            "scans_played": track.scans,
+            "scans_with_pose": track.published,
+            "translation_rmse_m": rounded(track.translation_rmse_m),
+            "translation_max_m": rounded(track.translation_max_m),
+            "rotation_max_deg": rounded(track.rotation_max_deg, 2),
+            f"scans_over_{LOST_M:g}m": track.published_far,
+            f"scans_within_{LOST_M:g}m_{LOST_DEG:g}deg": track.tracked,
+            "longest_loss_s": round(track.longest_loss_s, 2),
+            "recovery_after_gaps_s": [rounded(r, 2) for r in track.recovery_after_gaps_s],
+        }
+        if kept is not None:
             good = tracking(reference, trajectory, kept, summary["max_time_diff_s"])
-            extra = {
-                "trusted_scans_played": good.scans,
-                "trusted_scans_with_pose": good.published,
-                f"trusted_scans_within_{LOST_M:g}m_{LOST_DEG:g}deg": good.tracked,
-                "trusted_translation_rmse_m": good.translation_rmse_m,
-                "trusted_translation_max_m": good.translation_max_m,
-            }
-        rows.append(
-            {
-                "variant": variant,
-                "mode": mode,
-                "reference": VARIANTS[variant][1],
-                "ape_translation_rmse_m": (ape.get("translation_m") or {}).get("rmse"),
-                "ape_rotation_rmse_deg": (ape.get("rotation_deg") or {}).get("rmse"),
-                "scans_played": track.scans,
-                "scans_with_pose": track.published,
-                f"scans_within_{LOST_M:g}m_{LOST_DEG:g}deg": track.tracked,
-                "translation_max_m": track.translation_max_m,
-                "rotation_max_deg": track.rotation_max_deg,
-                "longest_loss_s": round(track.longest_loss_s, 2),
-                "recovery_after_gaps_s": [None if r is None else round(r, 2) for r in track.recovery_after_gaps_s],
-                **extra,
-            }
-        )
+            row.update(
+                straight_scans_played=good.scans,
+                straight_scans_with_pose=good.published,
+                straight_translation_rmse_m=rounded(good.translation_rmse_m),
+                straight_translation_max_m=rounded(good.translation_max_m),
+            )
+        first = m.get("start") or {}
+        for key in ("first_pose", "first_accepted_pose"):
+            pose = first.get(key)
+            row[f"time_to_{key}_s"] = None if pose is None else rounded(pose["after_s"], 2)
+            row[f"{key}_error_m"] = None if pose is None else rounded(pose["translation_error_m"])
+            row[f"{key}_yaw_error_deg"] = None if pose is None else rounded(pose["yaw_error_deg"], 2)
+        times = m.get("scan_time_ms") or {}
+        row["scan_time_ms"] = {k: rounded(times.get(k), 1) for k in ("median", "p95", "p99", "max")}
+        rows.append(row)
     return rows
+
+
+def start_hog() -> subprocess.Popen:
+    if shutil.which("taskset") is None:
+        raise SystemExit("--cpu-hog needs taskset (util-linux)")
+    return subprocess.Popen(CPU_HOG, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+
+
+def stop_hog(hog: subprocess.Popen) -> None:
+    hog.terminate()
+    try:
+        hog.wait(5)
+    except subprocess.TimeoutExpired:
+        hog.kill()
+        hog.wait()
+
+
+def run_variants(variants: list[str], out: Path, rate: str, hog: str | None) -> int:
+    out.mkdir(parents=True, exist_ok=True)
+    results, written, failed = [], set(), 0
+    for variant in variants:
+        v = VARIANTS[variant]
+        scenario, run = out / v.scenario, out / f"{variant}_run"
+        if v.scenario not in written:
+            subprocess.run([*GPM, *v.command, "-o", str(scenario), "--force", "--quiet"], check=True)
+            written.add(v.scenario)
+        shutil.rmtree(run, ignore_errors=True)  # its tiles were cut from a map that may have been replaced
+        experiment = [*GPM, "experiment", str(scenario), "-o", str(run), "--ndt-threads", "1", "--rate", rate]
+        experiment += ["--modes", *MODES, "--empty-map-seconds", "0", *v.experiment]
+        log = out / f"{variant}_experiment.log"
+        with open(log, "w") as f:
+            done = subprocess.run(experiment, stdout=f, stderr=subprocess.STDOUT)
+        if done.returncode != 0:
+            failed += 1
+            rows = [{"variant": variant, "cpu_hog": hog, "error": f"gpm experiment failed, see {log}"}]
+        else:
+            rows = figures(variant, scenario, run, hog)
+        for row in rows:
+            print(json.dumps(row), flush=True)
+        results += rows
+        with atomic_write(out / "results.jsonl") as f:
+            f.writelines(json.dumps(row) + "\n" for row in results)
+    return 1 if failed else 0
 
 
 def main() -> int:
@@ -135,40 +230,27 @@ def main() -> int:
     parser.add_argument("variants", nargs="+", help=f"sets ({', '.join(SETS)}) or variants ({', '.join(VARIANTS)})")
     parser.add_argument("--out", type=Path, default=ROOT / "build" / "experiment_tracking")
     parser.add_argument("--rate", default="1", help="bag playback speed (default 1)")
+    parser.add_argument(
+        "--cpu-hog", action="store_true", help="keep core 1 busy for the whole run: " + shlex.join(CPU_HOG)
+    )
     args = parser.parse_args()
     variants = [v for name in args.variants for v in SETS.get(name, [name])]
     for variant in variants:
         if variant not in VARIANTS:
             parser.error(f"unknown variant {variant} (use {', '.join(SETS)} or {', '.join(VARIANTS)})")
-    if any(v.startswith("mulran") for v in variants) and not (MULRAN / "Scans").is_dir():
+    if any(v.startswith("kitti_") for v in variants) and not (KITTI / "scans").is_dir():
         print(
-            f"experiment-real: the MulRan keyframes are not at {MULRAN}; this experiment needs the team's real data"
-            " (../shared/data/real beside the clone, or GPL_SHARED_DATA)",
+            f"experiment-real: the kitti00_far keyframes are not at {KITTI} (no scans/ there); this experiment needs "
+            "the team's real data (../shared/data/real beside the clone, or GPL_SHARED_DATA)",
             file=sys.stderr,
         )
         return 2
-    args.out.mkdir(parents=True, exist_ok=True)
-    for variant in variants:
-        scenario, run = args.out / variant, args.out / f"{variant}_run"
-        command = VARIANTS[variant][0]
-        subprocess.run([*GPM, *command, "-o", str(scenario), "--force", "--quiet"], check=True)
-        shutil.rmtree(run, ignore_errors=True)  # its tiles were cut from the map just replaced
-        experiment = [*GPM, "experiment", str(scenario), "-o", str(run), "--ndt-threads", "1", "--rate", args.rate]
-        experiment += ["--modes", *MODES]
-        if variant.startswith("mulran"):
-            # A car's 64-beam scans reach far beyond the demo window (n 8: 17 m each side); the urban preset's
-            # window (n 25: 51 m) covers the range the scans are matched over.
-            experiment += ["--preset", "urban"]
-        log = args.out / f"{variant}_experiment.log"
-        with open(log, "w") as f:
-            done = subprocess.run(experiment, stdout=f, stderr=subprocess.STDOUT)
-        if done.returncode != 0:
-            print(json.dumps({"variant": variant, "error": f"gpm experiment failed, see {log}"}), flush=True)
-            continue
-        trusted = trusted_stamps() if variant.startswith("mulran") else None
-        for row in figures(variant, scenario, run, trusted):
-            print(json.dumps(row), flush=True)
-    return 0
+    hog = start_hog() if args.cpu_hog else None
+    try:
+        return run_variants(variants, args.out, args.rate, shlex.join(CPU_HOG) if hog else None)
+    finally:
+        if hog is not None:
+            stop_hog(hog)
 
 
 if __name__ == "__main__":

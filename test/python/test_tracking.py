@@ -28,6 +28,7 @@ def test_losses_and_recoveries_against_hand_counts():
     got = tracking(reference, estimate, stamps, max_diff=0.05, lost_m=1.0)
     assert got.scans == 30 and got.published == 27
     assert got.tracked == 30 - 4 - 3 - 2
+    assert got.published_far == 4 + 2  # 3 m and 2 m off; 0.2 m is within 1 m
     assert got.longest_loss_s == pytest.approx(2.0)  # 2.0 s -> 4.0 s
     assert got.recovery_after_gaps_s == [pytest.approx(1.0)]  # first scan after the gap 15.0 s, tracked 16.0 s
     errors = error[published]
@@ -42,6 +43,7 @@ def test_a_pose_turned_too_far_is_lost_even_in_the_right_place():
     yaw = np.where(np.arange(10) % 2 == 1, 60.0, 0.0)  # every other pose 60 deg off, positions exact
     got = tracking(reference, trajectory(stamps, stamps, yaw), stamps, max_diff=0.05)
     assert got.published == 10 and got.tracked == 5 and got.translation_max_m == 0.0
+    assert got.published_far == 0
     assert got.rotation_max_deg == pytest.approx(60.0)
     assert got.longest_loss_s == pytest.approx(0.5)
 

@@ -26,6 +26,7 @@ class Tracking:
     scans: int  # played scans that have a reference pose
     published: int  # of them with a published pose
     tracked: int  # of them with a published pose within LOST_M and LOST_DEG
+    published_far: int  # of them with a published pose farther than LOST_M (whatever its heading)
     translation_rmse_m: float | None  # over the published poses
     translation_max_m: float | None
     rotation_max_deg: float | None
@@ -70,6 +71,7 @@ def tracking(
         scans=len(stamps),
         published=int(published.sum()),
         tracked=int(good.sum()),
+        published_far=int((published & (error > lost_m)).sum()),
         translation_rmse_m=float(np.sqrt(np.mean(error[published] ** 2))) if published.any() else None,
         translation_max_m=float(error[published].max()) if published.any() else None,
         rotation_max_deg=float(turn[published].max()) if published.any() else None,
