@@ -13,6 +13,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "grid_puzzle_localization/map_store/map_store.hpp"
 #include "grid_puzzle_localization/point_cloud.hpp"
 #include "grid_puzzle_localization/tile_cache.hpp"
 #include "grid_puzzle_localization/voxel_map.hpp"
@@ -27,7 +28,8 @@ struct TileCloud {
 
 /// Tiles by reference: which tile files of a directory enter and leave the window. The worker reads them.
 struct TileFileChange {
-  std::string dir;                    ///< tile directory: tile `id` is the file dir/id.pcd
+  std::string dir;                    ///< tile directory: tile `id` is the file dir/id.pcd; or an http(s):// URL
+                                      ///< of one (a map store: the worker fetches the tiles into its disk cache)
   std::string index_revision;         ///< identity of the directory's index; another value means other tiles
   bool reset = false;                 ///< drop every loaded tile (and the cache) before applying this change
   std::vector<std::string> added;     ///< tiles entering; an id already loaded is read again
@@ -79,6 +81,10 @@ struct MapUpdateStats {
   std::size_t cache_hits = 0;        ///< entering tiles served by the prefetch cache
   std::size_t cache_bytes = 0;       ///< bytes held by the prefetch cache now
   std::size_t points_outside = 0;    ///< tile-aligned: points not added because their voxel is in another tile
+  // A tile directory given by URL (map store):
+  bool map_store_reachable = true;    ///< the last request reached its server
+  std::string map_store_error;        ///< its last failure, naming the URL; "" if none
+  std::size_t map_store_fetched = 0;  ///< tiles downloaded (the rest came from its disk cache)
 };
 
 class MapUpdateWorker {
@@ -89,6 +95,8 @@ class MapUpdateWorker {
   static constexpr double kDefaultTileCacheMb = 1.0;
   /// Byte budget of the prefetch cache of tiles mode by reference [MiB] (>= 0; 0 = no prefetch). Thread-safe.
   void setTileCacheMb(double megabytes);
+  /// Settings of the map store used for a tile directory given by URL (before the first such change). Thread-safe.
+  void setMapStoreConfig(const MapStoreConfig& config);
   /// Stops the worker after the change in progress; queued changes are dropped.
   ~MapUpdateWorker();
   MapUpdateWorker(const MapUpdateWorker&) = delete;
@@ -136,7 +144,10 @@ class MapUpdateWorker {
   // Adds tiles as one target update when tile-aligned; a tile already loaded is replaced.
   void addTiles(NdtTarget& target, const std::vector<PendingTile>& batch);
   PointCloud readTile(const std::string& path);  // counts into stats_
-  void readAhead();                              // prefetch while nothing is queued
+  // The map store of `url` at `revision` (opened, or its index polled, as needed); throws std::invalid_argument
+  // when it cannot be opened or the server's index is of another revision.
+  MapStore& storeAt(const std::string& url, const std::string& revision);
+  void readAhead();  // prefetch while nothing is queued
 
   mutable std::mutex mutex_;  // guards everything below up to worker_
   std::condition_variable wake_;
@@ -163,6 +174,8 @@ class MapUpdateWorker {
   std::vector<std::string> prefetch_;      // ids still to read ahead
   TileCache cache_;                        // worker thread only; its budget comes from cache_budget_
   std::size_t cache_budget_;               // guarded by mutex_ (setTileCacheMb)
+  MapStoreConfig store_config_;            // guarded by mutex_
+  std::unique_ptr<MapStore> store_;        // worker thread only: the tile directory given by URL, if any
   bool prefetching_ = false;               // guarded by mutex_
   MapUpdateStats totals_;                  // worker thread only: the by-reference totals of stats_
   std::thread worker_;

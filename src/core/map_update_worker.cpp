@@ -3,6 +3,7 @@
 #include <sys/stat.h>
 #include <time.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -86,6 +87,13 @@ void MapUpdateWorker::setTileCacheMb(double megabytes) {
   cache_budget_ = static_cast<std::size_t>(megabytes * 1024 * 1024);
 }
 
+void MapUpdateWorker::setMapStoreConfig(const MapStoreConfig& config) {
+  const std::string problem = config.validate();
+  if (!problem.empty()) throw std::invalid_argument(problem);
+  std::lock_guard<std::mutex> lock(mutex_);
+  store_config_ = config;
+}
+
 void MapUpdateWorker::submit(MapChange change) {
   {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -155,6 +163,12 @@ void timed(double& wall_ms, double& cpu_ms, Work&& work) {
 }
 
 constexpr std::size_t kFoldBatchPoints = 1 << 21;  // ~2 M points read per fold, their voxels waiting meanwhile
+constexpr std::size_t kFetchBatch = 32;            // tiles fetched from a map store at once (concurrently), then read
+
+std::string withoutTrailingSlash(std::string url) {
+  while (url.size() > 1 && url.back() == '/') url.pop_back();
+  return url;
+}
 
 bool isDirectory(const std::string& path) {
   struct stat st;
@@ -261,9 +275,34 @@ PointCloud MapUpdateWorker::readTile(const std::string& path) {
   return points;
 }
 
+MapStore& MapUpdateWorker::storeAt(const std::string& url, const std::string& revision) {
+  if (!store_ || store_->url() != withoutTrailingSlash(url)) {
+    MapStoreConfig config;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      config = store_config_;
+    }
+    store_.reset();
+    store_ = std::make_unique<MapStore>(url, config);  // fetches the index (network, on this thread)
+  }
+  if (store_->status().revision != revision) store_->pollIndex();
+  const std::string held = store_->status().revision;
+  if (held != revision)
+    throw std::invalid_argument(
+        "map store " + store_->url() + ": its index is at revision '" + held + "', the change names '" + revision +
+        "'; keeping the " + std::to_string(tiles_.size()) +
+        " tiles loaded until the provider sends the reset of the server's revision" +
+        (store_->status().last_error.empty() ? "" : " (last error: " + store_->status().last_error + ")"));
+  return *store_;
+}
+
 void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const TileFileChange& change,
                                      std::vector<std::string>& failures) {
-  if (!isDirectory(change.dir))
+  const bool remote = isMapStoreUrl(change.dir);
+  // A directory given by URL: every tile of this change is checked against the index of exactly this revision, so
+  // tiles of two revisions never meet in one target.
+  MapStore* store = remote ? &storeAt(change.dir, change.index_revision) : nullptr;
+  if (!remote && !isDirectory(change.dir))
     throw std::invalid_argument("tile directory '" + change.dir + "' does not exist; keeping the " +
                                 std::to_string(tiles_.size()) + " tiles loaded (check the provider's tiles/dir)");
   const bool same_source = change.dir == tile_dir_ && change.index_revision == index_revision_;
@@ -286,8 +325,20 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
     pending.clear();
     pending_points = 0;
   };
-  for (const std::string& id : change.added) {
-    const std::string path = change.dir + "/" + id + ".pcd";
+  // From a map store, tiles come in batches fetched concurrently into its disk cache, each read before the next
+  // batch is fetched (a fetched file is kept until the store's next fetch).
+  std::unordered_map<std::string, FetchedTile> fetched;
+  for (std::size_t k = 0; k < change.added.size(); ++k) {
+    const std::string& id = change.added[k];
+    const std::string path = change.dir + "/" + id + ".pcd";  // the prefetch cache's key (a URL for a map store)
+    if (store && k % kFetchBatch == 0) {
+      std::vector<std::string> batch;
+      for (std::size_t b = k; b < std::min(k + kFetchBatch, change.added.size()); ++b)
+        if (!(aligned_ && cache_.contains(change.dir + "/" + change.added[b] + ".pcd")))
+          batch.push_back(change.added[b]);
+      fetched.clear();
+      for (FetchedTile& t : store->fetch(batch)) fetched[t.id] = std::move(t);
+    }
     try {
       std::optional<TileVoxels> cached = aligned_ ? cache_.take(path) : std::nullopt;
       if (cached) {
@@ -297,7 +348,14 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
         tile.voxels = std::move(*cached);
         pending.push_back(std::move(tile));
       } else {
-        PointCloud points = readTile(path);
+        std::string file = path;
+        if (store) {
+          const auto t = fetched.find(id);
+          if (t == fetched.end() || t->second.path.empty())
+            throw std::runtime_error(t == fetched.end() ? "not fetched from " + change.dir : t->second.error);
+          file = t->second.path;
+        }
+        PointCloud points = readTile(file);
         pending_points += points.size();
         timed(totals_.tile_fold_ms, totals_.tile_fold_cpu_ms,
               [&] { pending.push_back(pendingTile(id, std::move(points))); });
@@ -323,7 +381,15 @@ void MapUpdateWorker::readAhead() {
     // Read ahead keeps a tile's voxel statistics; without tile-aligned voxels there are none to keep.
     if (!aligned_ || tiles_.count(id) || cache_.contains(path) || cache_.budget() == 0) continue;
     try {
-      cache_.put(path, pendingTile(id, readTile(path)).voxels);
+      std::string file = path;
+      if (isMapStoreUrl(tile_dir_)) {
+        // The store of the loaded tiles (their revision); one tile at a time, so a queued change waits little.
+        if (!store_ || store_->url() != withoutTrailingSlash(tile_dir_)) continue;
+        const FetchedTile t = store_->fetch({id}).front();
+        if (t.path.empty()) continue;
+        file = t.path;
+      }
+      cache_.put(path, pendingTile(id, readTile(file)).voxels);
     } catch (const std::exception&) {
       // Reported when the tile enters the window and is read again.
     }
@@ -440,6 +506,12 @@ void MapUpdateWorker::run() {
     stats_.cache_hits = totals_.cache_hits;
     stats_.points_outside = totals_.points_outside;
     stats_.cache_bytes = cache_.bytes();
+    if (store_) {
+      const MapStoreStatus store = store_->status();
+      stats_.map_store_reachable = store.reachable;
+      stats_.map_store_error = store.reachable ? "" : "map store " + store.url + " unreachable: " + store.last_error;
+      stats_.map_store_fetched = store.tiles_fetched;
+    }
     if (queue_.empty() && retired_.empty()) idle_.notify_all();
   }
 }

@@ -63,6 +63,27 @@ struct TileDirectory {
   std::string tilePath(const TileKey& key) const { return path + "/" + tileStem(key.i, key.j, grid_size) + ".pcd"; }
 };
 
+/// One tile as index.json lists it: what a copy of the file fetched from elsewhere (the HTTP map store) is checked
+/// against before it is used.
+struct TileIndexEntry {
+  std::string file;         ///< file name in the directory, e.g. "1.0_-3.0.pcd" (as the index says: not validated)
+  std::uint64_t bytes = 0;  ///< file size [bytes]
+  std::string sha256;       ///< SHA-256 of the file, 64 lowercase hex digits; empty in an index written without them
+};
+
+/// What an index.json says, parsed from its text (`gpm tile`'s schema, src/grid_puzzle_localization/tiling/index.py).
+struct TileIndexListing {
+  double grid_size = 0.0;             ///< s [m]
+  std::vector<TileIndexEntry> tiles;  ///< in the index's order
+  TileRuns keys;                      ///< every tile's key
+  bool checksums() const { return !tiles.empty() && !tiles.front().sha256.empty(); }
+};
+
+/// Parses the text of an index.json; `what` (its path or URL) names it in the error. Old indexes without `sha256`
+/// are accepted; an index with `sha256` on some tiles only, or one that is not 64 lowercase hex digits, is not.
+/// Throws std::invalid_argument naming `what` and the problem.
+TileIndexListing parseTileIndex(const std::string& text, const std::string& what);
+
 /// Opens `path` through its index.json, or by scanning it when there is none. `grid_size` [m]: 0 takes the index's;
 /// required without an index and must match the index when both are given. Throws std::invalid_argument naming the
 /// directory and what to do when it is missing, unreadable or holds no tiles.

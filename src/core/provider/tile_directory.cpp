@@ -74,16 +74,36 @@ class IndexReader {
   bool number_integer(json::number_integer_t v) { return number(static_cast<long double>(v), true); }
   bool number_unsigned(json::number_unsigned_t v) { return number(static_cast<long double>(v), true); }
   bool number_float(json::number_float_t v, const json::string_t&) { return number(v, false); }
+  // Set to collect every tile's file, size and checksum (parseTileIndex), not only its key.
+  bool collect_entries = false;
+  std::vector<TileIndexEntry> entries;
+
   bool string(json::string_t& v) {
     if (stack_.size() == 1 && key_ == "format") format = v;
+    if (collect_entries && inTile() && key_ == "file") entry_.file = v;
+    if (collect_entries && inTile() && key_ == "sha256") {
+      if (!isSha256Hex(v)) return fail("a tile's sha256 '" + v.substr(0, 80) + "' is not 64 lowercase hex digits");
+      entry_.sha256 = v;
+    }
     return value();
   }
   template <class Binary>
   bool binary(Binary&) {
     return value();
   }
-  bool start_object(std::size_t) { return open('{'); }
-  bool end_object() { return close(); }
+  bool start_object(std::size_t) {
+    if (collect_entries && stack_.size() == 2 && in_tiles_) entry_ = TileIndexEntry();
+    return open('{');
+  }
+  bool end_object() {
+    if (collect_entries && inTile()) {
+      if (entry_.file.empty()) return fail("tile " + std::to_string(entries.size()) + " has no file name");
+      if (!entries.empty() && entries.front().sha256.empty() != entry_.sha256.empty())
+        return fail("some tiles have a sha256 and others have none");
+      entries.push_back(std::move(entry_));
+    }
+    return close();
+  }
   bool start_array(std::size_t) {
     if (inKey()) key_values_ = 0;
     return open('[');
@@ -113,6 +133,11 @@ class IndexReader {
 
  private:
   bool inKey() const { return stack_.size() == 3 && in_tiles_ && in_key_array_; }
+  bool inTile() const { return stack_.size() == 3 && in_tiles_; }
+  static bool isSha256Hex(const std::string& v) {
+    return v.size() == 64 &&
+           std::all_of(v.begin(), v.end(), [](char c) { return (c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'); });
+  }
   bool open(char kind) {
     if (stack_.size() == 1 && kind == '[') in_tiles_ = key_ == "tiles";
     stack_.push_back(kind);
@@ -127,6 +152,10 @@ class IndexReader {
   bool number(long double v, bool integral) {
     if (stack_.size() == 1 && key_ == "version" && integral) version = static_cast<std::uint64_t>(v);
     if (stack_.size() == 1 && key_ == "grid_size") grid_size = static_cast<double>(v);
+    if (collect_entries && inTile() && key_ == "bytes") {
+      if (!integral || v < 0) return fail("a tile's bytes is not a non-negative integer");
+      entry_.bytes = static_cast<std::uint64_t>(v);
+    }
     if (stack_.size() == 4 && in_key_array_) {
       if (!integral) return fail("a tile key holds a non-integer");
       (key_values_ == 0 ? key_i_ : key_j_) = static_cast<std::int64_t>(v);
@@ -144,6 +173,7 @@ class IndexReader {
   bool in_tiles_ = false, in_key_array_ = false;
   int key_values_ = 0;
   std::int64_t key_i_ = 0, key_j_ = 0;
+  TileIndexEntry entry_;
 };
 
 // `runs` with the tiles of `codes` (any order; duplicates dropped).
@@ -159,21 +189,26 @@ TileRuns withCodes(TileRuns runs, std::vector<std::uint64_t> codes) {
   return out;
 }
 
+// Why a parsed index cannot be used ("" when it can).
+template <class Input>
+std::string parseIndex(Input&& in, IndexReader& reader) {
+  if (!nlohmann::json::sax_parse(std::forward<Input>(in), &reader))
+    return reader.error.empty() ? "not JSON" : reader.error;
+  if (reader.format != kIndexFormat || reader.version != kIndexVersion)
+    return "not a version " + std::to_string(kIndexVersion) + " " + kIndexFormat + " index";
+  if (!(std::isfinite(reader.grid_size) && reader.grid_size > 0.0)) return "no positive grid_size";
+  return "";
+}
+
+std::invalid_argument unreadableIndex(const std::string& what, const std::string& problem) {
+  return std::invalid_argument(what + ": not a readable tile index (" + problem + "); re-run `gpm tile`");
+}
+
 TileRuns readIndexKeys(const std::string& index_path, double& grid_size) {
   std::ifstream in(index_path, std::ios::binary);
   IndexReader reader;
-  std::string problem;
-  if (!in) {
-    problem = "cannot be opened";
-  } else if (!nlohmann::json::sax_parse(in, &reader)) {
-    problem = reader.error.empty() ? "not JSON" : reader.error;
-  } else if (reader.format != kIndexFormat || reader.version != kIndexVersion) {
-    problem = "not a version " + std::to_string(kIndexVersion) + " " + kIndexFormat + " index";
-  } else if (!(std::isfinite(reader.grid_size) && reader.grid_size > 0.0)) {
-    problem = "no positive grid_size";
-  }
-  if (!problem.empty())
-    throw std::invalid_argument(index_path + ": not a readable tile index (" + problem + "); re-run `gpm tile`");
+  const std::string problem = in ? parseIndex(in, reader) : "cannot be opened";
+  if (!problem.empty()) throw unreadableIndex(index_path, problem);
   grid_size = reader.grid_size;
   return withCodes(std::move(reader.runs), std::move(reader.unsorted));
 }
@@ -233,6 +268,18 @@ bool parseTileStem(const std::string& stem, double s, TileKey& key) {
   if (tileStem(k.i, k.j, s) != stem) return false;
   key = k;
   return true;
+}
+
+TileIndexListing parseTileIndex(const std::string& text, const std::string& what) {
+  IndexReader reader;
+  reader.collect_entries = true;
+  const std::string problem = parseIndex(text, reader);
+  if (!problem.empty()) throw unreadableIndex(what, problem);
+  TileIndexListing listing;
+  listing.grid_size = reader.grid_size;
+  listing.tiles = std::move(reader.entries);
+  listing.keys = withCodes(std::move(reader.runs), std::move(reader.unsorted));
+  return listing;
 }
 
 std::string tileIndexRevision(const std::string& dir) {
