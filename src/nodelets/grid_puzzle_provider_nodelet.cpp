@@ -7,7 +7,9 @@
 // server and publishes each change of the window by reference on `tile_delta` (the localizer reads the files) and
 // the latched `~status`. A new subscriber first receives a reset delta of the whole window at the current revision;
 // `~resend` (std_srvs/Trigger) broadcasts one. A tile directory rewritten under the running nodelet (a new index
-// revision) is reopened and the whole window sent again as a reset; one that cannot be opened is retried.
+// revision) is reopened and the whole window sent again as a reset; one that cannot be opened is retried. A tile
+// directory given by URL (http(s)://, a map store: docs/map_store.md) is read through its index.json, polled every
+// map_store/poll_period with its ETag, outside the window's lock.
 // The newest pose is kept on the parameter server (~last_pose, save_pose_rate): killed with its manager (and the
 // localizer in it) and respawned, the nodelet serves the window there until a pose arrives, so the respawned
 // localizer has the map its global search around its own saved pose needs.
@@ -29,7 +31,9 @@
 #include "grid_puzzle_localization/NdtStatus.h"
 #include "grid_puzzle_localization/ProviderStatus.h"
 #include "grid_puzzle_localization/TileDelta.h"
+#include "grid_puzzle_localization/map_store/map_store.hpp"
 #include "grid_puzzle_localization/provider/window_server.hpp"
+#include "map_store_params.hpp"
 #include "provider_map_cloud.hpp"
 #include "provider_msgs.hpp"
 #include "provider_params.hpp"
@@ -56,8 +60,10 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
     ros::NodeHandle& pnh = getMTPrivateNodeHandle();
     try {
       config_ = loadProviderConfig(pnh);
+      store_config_ = loadMapStoreConfig(pnh);
       // tile_delta names the directory the localizer reads: absolute, whatever the manager's working directory.
-      if (config_.tiles_dir.front() != '/') config_.tiles_dir = (std::filesystem::current_path() / config_.tiles_dir);
+      if (config_.tiles_dir.front() != '/' && !isMapStoreUrl(config_.tiles_dir))
+        config_.tiles_dir = (std::filesystem::current_path() / config_.tiles_dir);
     } catch (const std::invalid_argument& e) {
       NODELET_FATAL("%s: %s", getName().c_str(), e.what());
       throw;
@@ -166,6 +172,7 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
         std::swap(tracking_again, tracking_again_);
       }
       if (!openDirectory()) continue;
+      pollStore();
       if (tracking_again) {
         std::lock_guard<std::mutex> lock(server_mutex_);
         server_->endSearch();  // the next pose is measured again: the window goes back to it
@@ -191,7 +198,9 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
   bool openDirectory() {
     if (server_) return true;
     try {
-      TileDirectory directory = openTileDirectory(config_.tiles_dir, config_.tiles_grid_size);
+      TileDirectory directory = isMapStoreUrl(config_.tiles_dir)
+                                    ? openStore()
+                                    : openTileDirectory(config_.tiles_dir, config_.tiles_grid_size);
       const std::size_t tiles = directory.tiles.size();
       if (!directory.unparsable.empty())
         NODELET_WARN("%s: %zu .pcd files are not tiles of side %g m and are ignored, e.g. %s",
@@ -212,6 +221,53 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
       std::this_thread::sleep_for(std::chrono::milliseconds(500));
       return false;
     }
+  }
+
+  // The tile directory given by URL, through its index (fetched over the network, or the cache's when the server is
+  // down and the cache holds one).
+  TileDirectory openStore() {
+    if (!store_) store_ = std::make_unique<MapStore>(config_.tiles_dir, store_config_);
+    remote_ = std::make_shared<RemoteTileIndex>();
+    TileDirectory directory = tileDirectoryOfIndex(store_->url(), store_->index(), config_.tiles_grid_size);
+    remote_->set(directory, store_->status().revision);
+    directory.remote = remote_;
+    next_poll_ = nextPoll();
+    reportStore();
+    return directory;
+  }
+
+  std::chrono::steady_clock::time_point nextPoll() const {
+    return std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                                  std::chrono::duration<double>(store_config_.poll_period));
+  }
+
+  // Polls the map store's index.json when due (outside the window's lock: the network may be slow); a new revision
+  // is handed to the window's tile references, whose refresh then sends the whole window as a reset.
+  void pollStore() {
+    if (!store_ || std::chrono::steady_clock::now() < next_poll_) return;
+    next_poll_ = nextPoll();
+    try {
+      if (store_->pollIndex())
+        remote_->set(tileDirectoryOfIndex(store_->url(), store_->index(), config_.tiles_grid_size),
+                     store_->status().revision);
+    } catch (const std::exception& e) {
+      NODELET_ERROR_THROTTLE(kWarnPeriod, "map store %s: new index not used: %s", store_->url().c_str(), e.what());
+    }
+    reportStore();
+  }
+
+  // Says when the map store's server stops or starts answering (the window keeps being served meanwhile).
+  void reportStore() {
+    const MapStoreStatus status = store_->status();
+    if (!status.reachable)
+      NODELET_WARN_THROTTLE(kWarnPeriod,
+                            "map store %s unreachable (%s): serving the tiles of index revision %s, retrying every "
+                            "%g s",
+                            status.url.c_str(), status.last_error.c_str(), status.revision.c_str(),
+                            store_config_.poll_period);
+    else if (!store_reachable_)
+      NODELET_INFO("map store %s reachable (index revision %s)", status.url.c_str(), status.revision.c_str());
+    store_reachable_ = status.reachable;
   }
 
   // Serves the window that holds the lost localizer's search region.
@@ -327,6 +383,12 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
   }
 
   ProviderConfig config_;
+  MapStoreConfig store_config_;
+  // Worker only: the map store of a tile directory given by URL, and the index it hands to the window.
+  std::unique_ptr<MapStore> store_;
+  std::shared_ptr<RemoteTileIndex> remote_;
+  std::chrono::steady_clock::time_point next_poll_;
+  bool store_reachable_ = true;
   std::mutex server_mutex_;  // the window server, the revision, and every publish on tile_delta
   std::optional<WindowServer> server_;
   double s_ = 0.0;  // tile side [m], set with server_

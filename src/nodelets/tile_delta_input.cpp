@@ -57,7 +57,8 @@ std::optional<MapChange> TileDeltaInput::accept(const TileDelta& msg, const MapU
         "tile side %g m is not a whole multiple of ~ndt/resolution %g m: voxels straddle tiles, so each tile's "
         "statistics are kept as well (more memory per voxel); use a resolution that divides the tile side",
         msg.grid_size, ndt_resolution_);
-  if (by_reference && !isDirectory(msg.tile_dir)) {
+  // A URL (map store) is checked by the map worker, which fetches from it.
+  if (by_reference && !isMapStoreUrl(msg.tile_dir) && !isDirectory(msg.tile_dir)) {
     // Checked here, not only by the map worker, so the deltas missed meanwhile are made up by a resend.
     sequence_.notApplied();
     ROS_ERROR_THROTTLE_NAMED(

@@ -19,6 +19,7 @@
 #include "grid_puzzle_localization/map_store/map_store.hpp"
 #include "grid_puzzle_localization/map_update_worker.hpp"
 #include "grid_puzzle_localization/provider/tile_directory.hpp"
+#include "grid_puzzle_localization/provider/tile_references.hpp"
 #include "nginx_server.hpp"
 #include "synthetic_world.hpp"
 #include "tile_files.hpp"
@@ -282,7 +283,7 @@ TEST_F(MapStoreTest, TheCacheSurvivesARestartAndServesOfflineWhatItHolds) {
     store.fetch({ids[0], ids[1]});
     dir = store.cacheDirectory();
   }
-  writeFile(dir + "/tiles/.tmp-1-0-x", "half a file");  // a write a crash interrupted
+  writeFile(dir + "/tiles/.tmp-999999999-0-x", "half a file");  // a write of a process that died
   server_->stop();
   gpl::MapStore store(url(), config_);  // starts on the cached index
   EXPECT_FALSE(store.status().reachable);
@@ -292,7 +293,7 @@ TEST_F(MapStoreTest, TheCacheSurvivesARestartAndServesOfflineWhatItHolds) {
   EXPECT_NE(fetched[2].error, "");
   EXPECT_EQ(store.status().tiles_fetched, 0u);
   struct stat st {};
-  EXPECT_NE(::stat((dir + "/tiles/.tmp-1-0-x").c_str(), &st), 0);  // dropped at start-up
+  EXPECT_NE(::stat((dir + "/tiles/.tmp-999999999-0-x").c_str(), &st), 0);  // dropped at start-up
   // A cached file damaged on disk is caught by its checksum and fetched again.
   server_->start();
   writeFile(fetched[0].path, std::string(map_->bytes(ids[0]).size(), 'z'));
@@ -472,4 +473,32 @@ TEST(MapWorkerOverHttp, ATileDirectoryByUrlGivesTheTargetOfTheLocalDirectoryAndR
   EXPECT_NE(refused[0].find("revision"), std::string::npos) << refused[0];
   EXPECT_EQ(remote.stats().tiles, 41u);
   std::system(("rm -rf '" + cache + "'").c_str());
+}
+
+// ---- the provider's tile references follow a directory given by URL through its polled index
+
+TEST_F(MapStoreTest, TheProvidersTileReferencesFollowAPolledRevision) {
+  gpl::MapStore store(url(), config_);
+  auto remote = std::make_shared<gpl::RemoteTileIndex>();
+  gpl::TileDirectory directory = gpl::tileDirectoryOfIndex(store.url(), store.index(), 0.0);
+  EXPECT_EQ(directory.grid_size, 2.0);
+  EXPECT_EQ(directory.tiles.size(), 8u);
+  remote->set(directory, store.status().revision);
+  directory.remote = remote;
+  gpl::TileReferences references(directory);
+  EXPECT_EQ(references.revision(), store.status().revision);
+  const gpl::TileBox box{0, 3, 0, 0};
+  EXPECT_EQ(references.update(box, {}).added.size(), 4u);
+  EXPECT_FALSE(references.refresh());
+  // A new revision with a ninth tile: polled, handed over, and the references start again from it.
+  map_->set(gpl::tileStem(8, 0, 2.0), std::string(100, 'q'));
+  map_->writeAll();
+  ASSERT_TRUE(store.pollIndex());
+  remote->set(gpl::tileDirectoryOfIndex(store.url(), store.index(), 0.0), store.status().revision);
+  EXPECT_TRUE(references.refresh());
+  EXPECT_EQ(references.revision(), store.status().revision);
+  EXPECT_EQ(references.directory().tiles.size(), 9u);
+  EXPECT_EQ(references.directory().path, url());
+  EXPECT_EQ(references.update(gpl::TileBox{0, 9, 0, 0}, {}).added.size(), 9u);
+  EXPECT_THROW(gpl::tileDirectoryOfIndex(store.url(), store.index(), 3.0), std::invalid_argument);
 }

@@ -30,6 +30,7 @@ struct MapStoreConfig {
   std::string bearer_token_file;                ///< file holding a bearer token (Authorization: Bearer), "" = none
   std::string bearer_token_env;                 ///< name of an environment variable holding a bearer token, "" = none
   std::string basic_auth_file;                  ///< file holding "user:password" for HTTP basic auth, "" = none
+  double poll_period = 5.0;                     ///< [s] between polls of index.json for a new revision (the provider)
 
   /// "" when valid, else what is wrong, naming the field.
   std::string validate() const;

@@ -5,7 +5,11 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
+#include <mutex>
+#include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "grid_puzzle_localization/provider/window.hpp"
@@ -52,13 +56,17 @@ class TileRuns {
   std::size_t size_ = 0;
 };
 
+class RemoteTileIndex;
+
 struct TileDirectory {
-  std::string path;
+  std::string path;                     ///< a local directory, or the URL of a map store
   double grid_size = 0.0;               ///< s [m]
   TileRuns tiles;                       ///< every tile of the directory
   std::string source;                   ///< "index" or "scan"
   std::vector<std::string> unparsable;  ///< *.pcd names that are not tiles of side s (scan only)
   TileBox bounds;                       ///< over all tiles
+  /// Set for a directory given by URL: the newest index its poller fetched (refresh() takes it from there).
+  std::shared_ptr<RemoteTileIndex> remote;
 
   std::string tilePath(const TileKey& key) const { return path + "/" + tileStem(key.i, key.j, grid_size) + ".pcd"; }
 };
@@ -83,6 +91,36 @@ struct TileIndexListing {
 /// are accepted; an index with `sha256` on some tiles only, or one that is not 64 lowercase hex digits, is not.
 /// Throws std::invalid_argument naming `what` and the problem.
 TileIndexListing parseTileIndex(const std::string& text, const std::string& what);
+
+/// The tile directory at `url` that `listing` (its index.json) describes; `grid_size` [m] as for openTileDirectory.
+/// Throws std::invalid_argument naming the URL when the sizes disagree or the index lists no tiles.
+TileDirectory tileDirectoryOfIndex(const std::string& url, const TileIndexListing& listing, double grid_size);
+
+/// The newest index of a tile directory given by URL and its revision, handed from the thread that polls the server
+/// (outside any lock the provider's window holds) to the window's tile references. Thread-safe.
+class RemoteTileIndex {
+ public:
+  void set(TileDirectory directory, std::string revision) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    directory_ = std::move(directory);
+    revision_ = std::move(revision);
+  }
+  std::string revision() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return revision_;
+  }
+  /// The directory and its revision when that is not `known`.
+  std::optional<std::pair<TileDirectory, std::string>> newerThan(const std::string& known) const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (revision_ == known) return std::nullopt;
+    return std::make_pair(directory_, revision_);
+  }
+
+ private:
+  mutable std::mutex mutex_;
+  TileDirectory directory_;
+  std::string revision_;
+};
 
 /// Opens `path` through its index.json, or by scanning it when there is none. `grid_size` [m]: 0 takes the index's;
 /// required without an index and must match the index when both are given. Throws std::invalid_argument naming the

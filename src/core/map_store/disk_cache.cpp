@@ -3,12 +3,14 @@
 #include <dirent.h>
 #include <fcntl.h>
 #include <openssl/evp.h>
+#include <signal.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
 #include <stdexcept>
 #include <tuple>
@@ -107,7 +109,10 @@ DiskCache::DiskCache(std::string dir, std::uint64_t budget) : dir_(std::move(dir
     if (name == "." || name == "..") continue;
     const std::string path = pathOf(name);
     if (name.compare(0, std::strlen(kTempPrefix), kTempPrefix) == 0) {
-      ::unlink(path.c_str());  // a write a crash interrupted
+      // A write a crash interrupted; a live process's (another store on this directory) is left alone.
+      const long pid = std::strtol(name.c_str() + std::strlen(kTempPrefix), nullptr, 10);
+      if (pid <= 0 || (pid != ::getpid() && ::kill(static_cast<pid_t>(pid), 0) != 0 && errno == ESRCH))
+        ::unlink(path.c_str());
       continue;
     }
     struct stat st {};

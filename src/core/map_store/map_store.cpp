@@ -89,6 +89,7 @@ std::string MapStoreConfig::validate() const {
   if (max_connections < 1 || max_connections > 64) return "map_store/max_connections must be in [1, 64]";
   if (max_tile_bytes == 0) return "map_store/max_tile_bytes must be > 0";
   if (max_index_bytes == 0) return "map_store/max_index_bytes must be > 0";
+  if (!(poll_period > 0.0 && std::isfinite(poll_period))) return "map_store/poll_period must be > 0 s";
   return "";
 }
 

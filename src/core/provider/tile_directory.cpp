@@ -333,6 +333,24 @@ TileBox TileRuns::bounds() const {
   return b;
 }
 
+TileDirectory tileDirectoryOfIndex(const std::string& url, const TileIndexListing& listing, double grid_size) {
+  const double s = listing.grid_size;
+  if (grid_size > 0.0 && std::fabs(grid_size - s) > 1e-9 * s)
+    throw std::invalid_argument("grid size " + std::to_string(grid_size) + " m disagrees with " + url +
+                                "/index.json, which says " + std::to_string(s) +
+                                " m; leave the grid size unset (0) to use the index's");
+  if (listing.keys.empty())
+    throw std::invalid_argument("tile directory " + url +
+                                ": its index lists no tiles; re-run `gpm tile` on a non-empty map");
+  TileDirectory dir;
+  dir.path = url;
+  dir.grid_size = s;
+  dir.tiles = listing.keys;
+  dir.source = "index";
+  dir.bounds = dir.tiles.bounds();
+  return dir;
+}
+
 TileDirectory openTileDirectory(const std::string& path, double grid_size) {
   if (!isDirectory(path))
     throw std::invalid_argument("tile directory " + path +

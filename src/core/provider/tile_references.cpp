@@ -30,7 +30,8 @@ std::vector<TileBox> boxMinus(const TileBox& a, const TileBox& b) {
 }
 
 TileReferences::TileReferences(TileDirectory directory)
-    : directory_(std::move(directory)), revision_(tileIndexRevision(directory_.path)) {}
+    : directory_(std::move(directory)),
+      revision_(directory_.remote ? directory_.remote->revision() : tileIndexRevision(directory_.path)) {}
 
 std::vector<std::uint64_t> TileReferences::codesIn(const std::vector<TileBox>& boxes) const {
   std::vector<std::uint64_t> codes;
@@ -71,6 +72,17 @@ std::vector<TileKey> TileReferences::loaded() const {
 }
 
 bool TileReferences::refresh() {
+  if (directory_.remote) {  // given by URL: the poller has fetched the newest index
+    auto newer = directory_.remote->newerThan(revision_);
+    if (!newer) return false;
+    std::shared_ptr<RemoteTileIndex> remote = directory_.remote;
+    directory_ = std::move(newer->first);
+    directory_.remote = std::move(remote);
+    revision_ = std::move(newer->second);
+    loaded_.clear();
+    has_box_ = false;
+    return true;
+  }
   std::string revision;
   try {
     revision = tileIndexRevision(directory_.path);
