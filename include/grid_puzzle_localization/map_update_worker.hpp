@@ -176,6 +176,7 @@ class MapUpdateWorker {
   std::size_t cache_budget_;               // guarded by mutex_ (setTileCacheMb)
   MapStoreConfig store_config_;            // guarded by mutex_
   std::unique_ptr<MapStore> store_;        // worker thread only: the tile directory given by URL, if any
+  std::vector<std::string> refetch_;       // worker thread only: window tiles its fetch failed, tried again
   bool prefetching_ = false;               // guarded by mutex_
   MapUpdateStats totals_;                  // worker thread only: the by-reference totals of stats_
   std::thread worker_;

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <stdexcept>
+#include <unordered_set>
 #if defined(__GLIBC__)
 #include <malloc.h>
 #endif
@@ -328,14 +329,22 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
   // From a map store, tiles come in batches fetched concurrently into its disk cache, each read before the next
   // batch is fetched (a fetched file is kept until the store's next fetch).
   std::unordered_map<std::string, FetchedTile> fetched;
-  for (std::size_t k = 0; k < change.added.size(); ++k) {
-    const std::string& id = change.added[k];
+  // Tiles of the window that could not be fetched (server down, a bad copy on it) are asked for again with the
+  // next change of the same source; a reset names the whole window anyway.
+  std::vector<std::string> added = change.added;
+  if (store && same_source && !change.reset) {
+    const std::unordered_set<std::string> leaving(change.removed.begin(), change.removed.end());
+    for (const std::string& id : refetch_)
+      if (!leaving.count(id) && !tiles_.count(id)) added.push_back(id);
+  }
+  refetch_.clear();
+  for (std::size_t k = 0; k < added.size(); ++k) {
+    const std::string& id = added[k];
     const std::string path = change.dir + "/" + id + ".pcd";  // the prefetch cache's key (a URL for a map store)
     if (store && k % kFetchBatch == 0) {
       std::vector<std::string> batch;
-      for (std::size_t b = k; b < std::min(k + kFetchBatch, change.added.size()); ++b)
-        if (!(aligned_ && cache_.contains(change.dir + "/" + change.added[b] + ".pcd")))
-          batch.push_back(change.added[b]);
+      for (std::size_t b = k; b < std::min(k + kFetchBatch, added.size()); ++b)
+        if (!(aligned_ && cache_.contains(change.dir + "/" + added[b] + ".pcd"))) batch.push_back(added[b]);
       fetched.clear();
       for (FetchedTile& t : store->fetch(batch)) fetched[t.id] = std::move(t);
     }
@@ -351,8 +360,10 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
         std::string file = path;
         if (store) {
           const auto t = fetched.find(id);
-          if (t == fetched.end() || t->second.path.empty())
+          if (t == fetched.end() || t->second.path.empty()) {
+            refetch_.push_back(id);
             throw std::runtime_error(t == fetched.end() ? "not fetched from " + change.dir : t->second.error);
+          }
           file = t->second.path;
         }
         PointCloud points = readTile(file);

@@ -454,19 +454,25 @@ TEST(MapWorkerOverHttp, ATileDirectoryByUrlGivesTheTargetOfTheLocalDirectoryAndR
   EXPECT_EQ(remote.stats().tiles, 40u);
   EXPECT_FALSE(remote.stats().map_store_reachable);
   EXPECT_NE(remote.stats().map_store_error.find(url), std::string::npos) << remote.stats().map_store_error;
-  // Back: the resend's reset loads the window, the tiles held come from the disk cache.
+  // Back: the next delta also fetches the tile that failed.
   server.start();
+  remote.submit(fileChange(url, world.revision(), false, {world.ids[56]}));
+  remote.waitIdle();
+  EXPECT_EQ(remote.takeErrors(), std::vector<std::string>());
+  EXPECT_EQ(remote.stats().tiles, 42u);
+  EXPECT_EQ(remote.stats().map_store_fetched, 52u);
+  EXPECT_TRUE(remote.stats().map_store_reachable);
+  // A reset of the window: the tiles held come from the disk cache.
   std::vector<std::string> window(world.ids.begin() + 10, world.ids.begin() + 50);
   window.push_back(world.ids[55]);
   remote.submit(fileChange(url, world.revision(), true, window));
   remote.waitIdle();
   EXPECT_EQ(remote.takeErrors(), std::vector<std::string>());
   EXPECT_EQ(remote.stats().tiles, 41u);
-  EXPECT_EQ(remote.stats().map_store_fetched, 51u);
-  EXPECT_TRUE(remote.stats().map_store_reachable);
+  EXPECT_EQ(remote.stats().map_store_fetched, 52u);
 
   // A delta naming another revision than the server's index is refused whole: no tiles of two revisions.
-  remote.submit(fileChange(url, "sha256:0000000000000000", false, {world.ids[56]}));
+  remote.submit(fileChange(url, "sha256:0000000000000000", false, {world.ids[57]}));
   remote.waitIdle();
   const std::vector<std::string> refused = remote.takeErrors();
   ASSERT_EQ(refused.size(), 1u);
