@@ -100,6 +100,15 @@ bench-global-localization: setup
 	  bash $(ROOT)/tools/build.sh >$$log 2>&1 || { tail -40 $$log; exit 1; }
 	@$(SETUP) python3 $(ROOT)/bench/bench_global_localization.py $(ARGS)
 
+# ---------------------------------------------------------------- map store (tiles over HTTP)
+.PHONY: bench-map-store
+# make bench-map-store [ARGS="--quick"]: a window of tiles fetched from nginx on localhost (docs/map_store.md).
+# Build output goes to build/bench_map_store_build.log so stdout holds only the JSON lines.
+bench-map-store: setup
+	@log=$(ROOT)/build/bench_map_store_build.log; mkdir -p $(ROOT)/build; \
+	  bash $(ROOT)/tools/build.sh >$$log 2>&1 || { tail -40 $$log; exit 1; }
+	@$(SETUP) $$GPL_WS/devel/lib/grid_puzzle_localization/bench_map_store $(ARGS)
+
 # ---------------------------------------------------------------- block maps
 .PHONY: bench-blocks
 bench-blocks: build

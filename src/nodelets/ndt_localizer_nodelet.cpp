@@ -29,6 +29,7 @@
 #include "imu_msg.hpp"
 #include "latest_scan_slot.hpp"
 #include "localizer_params.hpp"
+#include "map_store_params.hpp"
 #include "map_tf_broadcaster.hpp"
 #include "ndt_status_msg.hpp"
 #include "odometry_msg.hpp"
@@ -50,6 +51,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     try {
       params_ = loadLocalizerParams(pnh, getName());
       localizer_ = std::make_unique<Localizer>(params_.core);
+      localizer_->map().setMapStoreConfig(loadMapStoreConfig(pnh));  // a tile_dir given by URL (docs/map_store.md)
     } catch (const std::invalid_argument& e) {
       NODELET_FATAL("%s: %s", getName().c_str(), e.what());
       throw;

@@ -1,0 +1,112 @@
+// make bench-map-store: the map store fetching a window of tiles from a real nginx on localhost
+// (test/cpp/nginx_server.hpp), as the map worker does (batches of 32): cold (every tile downloaded, checked and
+// stored), warm (every tile from the disk cache, checked again) and an index poll answered 304. One JSON line per
+// configuration (tile size, connections). Localhost has no network latency: the figures are the client's own cost
+// (HTTP, SHA-256, disk cache), the floor of what a remote server adds to. --quick: tiny, for `make test`.
+#include <sys/stat.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "grid_puzzle_localization/map_store/map_store.hpp"
+#include "grid_puzzle_localization/provider/tile_directory.hpp"
+#include "nginx_server.hpp"
+
+namespace gpl = grid_puzzle_localization;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double secondsSince(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+
+std::string makeTempDir() {
+  const char* base = std::getenv("TMPDIR");
+  std::string tmpl = std::string(base && *base ? base : "/tmp") + "/gpl_bench_map_store_XXXXXX";
+  if (::mkdtemp(&tmpl[0]) == nullptr) throw std::runtime_error("mkdtemp failed");
+  return tmpl;
+}
+
+// `count` tiles of `bytes` random bytes each and their index.json under root/map; the stems.
+std::vector<std::string> writeMap(const std::string& root, int count, std::size_t bytes) {
+  ::mkdir((root + "/map").c_str(), 0755);
+  std::mt19937_64 rng(7);
+  std::vector<std::string> ids;
+  std::string entries;
+  for (int k = 0; k < count; ++k) {
+    const std::string id = gpl::tileStem(k % 100, k / 100, 2.0);
+    std::string data(bytes, '\0');
+    for (std::size_t b = 0; b + 8 <= bytes; b += 8) {
+      const std::uint64_t v = rng();
+      std::memcpy(&data[b], &v, 8);
+    }
+    std::ofstream(root + "/map/" + id + ".pcd", std::ios::binary) << data;
+    entries += std::string(entries.empty() ? "" : ",") + R"({"key":[)" + std::to_string(k % 100) + "," +
+               std::to_string(k / 100) + R"(],"file":")" + id + R"(.pcd","bytes":)" + std::to_string(bytes) +
+               R"(,"sha256":")" + gpl::sha256Hex(data) + "\"}";
+    ids.push_back(id);
+  }
+  std::ofstream(root + "/map/index.json")
+      << R"({"format":"grid_puzzle_tiles","version":1,"grid_size":2.0,"tiles":[)" << entries << "]}";
+  return ids;
+}
+
+double fetchAll(gpl::MapStore& store, const std::vector<std::string>& ids) {
+  const auto start = Clock::now();
+  for (std::size_t k = 0; k < ids.size(); k += 32) {
+    const std::vector<std::string> batch(ids.begin() + k, ids.begin() + std::min(ids.size(), k + 32));
+    for (const gpl::FetchedTile& t : store.fetch(batch))
+      if (t.path.empty()) throw std::runtime_error(t.error);
+  }
+  return secondsSince(start);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const bool quick = argc > 1 && std::strcmp(argv[1], "--quick") == 0;
+  if (gpl_test::NginxServer::binary().empty()) {
+    std::fprintf(stderr, "bench_map_store: nginx is not installed (apt-get install nginx-light)\n");
+    return 2;
+  }
+  const int count = quick ? 40 : 1000;
+  const std::vector<std::size_t> sizes =
+      quick ? std::vector<std::size_t>{8192} : std::vector<std::size_t>{8192, 262144};
+  for (const std::size_t bytes : sizes) {
+    const std::string root = makeTempDir();
+    const std::vector<std::string> ids = writeMap(root, count, bytes);
+    gpl_test::NginxServer server(root);
+    server.start();
+    for (const int connections : {1, 4}) {
+      const std::string cache = makeTempDir();
+      gpl::MapStoreConfig config;
+      config.cache_dir = cache;
+      config.max_connections = connections;
+      gpl::MapStore store(server.url("/map"), config);
+      const double cold = fetchAll(store, ids);
+      const double warm = fetchAll(store, ids);
+      const int polls = quick ? 5 : 50;
+      const auto start = Clock::now();
+      for (int p = 0; p < polls; ++p) store.pollIndex();
+      const double poll = secondsSince(start) / polls;
+      const gpl::MapStoreStatus s = store.status();
+      std::printf(
+          "{\"bench\":\"map_store\",\"tile_bytes\":%zu,\"tiles\":%d,\"max_connections\":%d,\"cold_s\":%.4f,"
+          "\"cold_tiles_per_s\":%.1f,\"cold_mb_per_s\":%.1f,\"warm_s\":%.4f,\"warm_tiles_per_s\":%.1f,"
+          "\"index_poll_304_ms\":%.3f,\"connections_opened\":%zu,\"tiles_fetched\":%zu,\"cache_hits\":%zu}\n",
+          bytes, count, connections, cold, count / cold, count * bytes / cold / 1e6, warm, count / warm, poll * 1e3,
+          s.connections_opened, s.tiles_fetched, s.cache_hits);
+      std::fflush(stdout);
+      std::system(("rm -rf '" + cache + "'").c_str());
+    }
+    server.stop();
+    std::system(("rm -rf '" + root + "'").c_str());
+  }
+  return 0;
+}
