@@ -93,6 +93,10 @@ class MapUpdateWorker {
   /// `threads` is the OpenMP team of the updates, so a small value leaves cores to the scan thread.
   explicit MapUpdateWorker(const VoxelMapParams& params);
   static constexpr double kDefaultTileCacheMb = 1.0;
+  /// The worker thread runs this much nicer than the thread that creates it (Linux: niceness is per thread), so on a
+  /// loaded machine matching the scans comes first and the target updates take the time left over: a localizer that
+  /// is busy with a large window change (a recovery) does not fall behind the scans because of it.
+  static constexpr int kWorkerNiceIncrement = 10;
   /// Byte budget of the prefetch cache of tiles mode by reference [MiB] (>= 0; 0 = no prefetch). Thread-safe.
   void setTileCacheMb(double megabytes);
   /// Settings of the map store used for a tile directory given by URL (before the first such change). Thread-safe.

@@ -1,9 +1,13 @@
 #include "grid_puzzle_localization/map_update_worker.hpp"
 
+#include <sys/resource.h>
 #include <sys/stat.h>
+#include <sys/syscall.h>
 #include <time.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -442,6 +446,13 @@ class HeapTrimmer {
 }  // namespace
 
 void MapUpdateWorker::run() {
+#if defined(__linux__)
+  // Best effort: raising one's own niceness needs no privilege; a failure only leaves the thread as it was.
+  const auto tid = static_cast<id_t>(syscall(SYS_gettid));
+  errno = 0;
+  const int nice = getpriority(PRIO_PROCESS, tid);
+  if (errno == 0) static_cast<void>(setpriority(PRIO_PROCESS, tid, std::min(19, nice + kWorkerNiceIncrement)));
+#endif
   NdtTarget target(params_);
   std::unique_lock<std::mutex> lock(mutex_);
   HeapTrimmer trimmer;

@@ -1,14 +1,21 @@
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
+#include <sys/syscall.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <map>
+#include <sstream>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "grid_puzzle_localization/map_update_worker.hpp"
 #include "grid_puzzle_localization/ndt.hpp"
@@ -226,4 +233,38 @@ TEST(MapUpdateWorker, FreedMapMemoryGoesBackToTheSystemOnceTheWorkerIsIdle) {
   }
   EXPECT_GE(with_map - std::min(now, with_map), map_bytes / 2)
       << "resident " << with_map << " B with the map of " << map_bytes << " B, " << now << " B after it was freed";
+}
+
+namespace {
+
+// The nice value (field 19 of /proc/self/task/TID/stat) of every thread of this process.
+std::vector<int> threadNiceValues() {
+  std::vector<int> out;
+  for (const auto& task : std::filesystem::directory_iterator("/proc/self/task")) {
+    std::ifstream stat(task.path() / "stat");
+    std::string text((std::istreambuf_iterator<char>(stat)), std::istreambuf_iterator<char>());
+    // The command name (field 2) may hold spaces: fields are counted after its closing parenthesis.
+    std::istringstream rest(text.substr(text.rfind(')') + 2));
+    std::string field;
+    for (int i = 3; i <= 19 && rest >> field; ++i)
+      if (i == 19) out.push_back(std::stoi(field));
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST(MapUpdateWorker, TheWorkerThreadIsNicerThanTheScanThread) {
+  errno = 0;
+  const int own = getpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)));
+  ASSERT_EQ(errno, 0);
+  if (own >= 19) GTEST_SKIP() << "the test runs at niceness 19 already: no thread can be nicer";
+  const std::vector<int> before = threadNiceValues();
+  gpl::MapUpdateWorker worker{gpl::VoxelMapParams()};
+  worker.submit(gpl::MapChange::fullCloud(gpl::test::makeWorld()));
+  worker.waitIdle();  // the thread lowered its priority before it took the change
+  const std::vector<int> after = threadNiceValues();
+  // The worker, and the OpenMP team it starts (whose threads inherit its niceness).
+  const int expected = std::min(19, own + gpl::MapUpdateWorker::kWorkerNiceIncrement);
+  EXPECT_GE(std::count(after.begin(), after.end(), expected), std::count(before.begin(), before.end(), expected) + 1);
 }
