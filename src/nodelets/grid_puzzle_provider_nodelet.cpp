@@ -85,6 +85,7 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
     }
     if (config_.lost_max_half_side > 0.0)
       status_sub_ = nh.subscribe("localizer_status", 1, &GridPuzzleProviderNodelet::onLocalizerStatus, this);
+    hint_sub_ = nh.subscribe("initialpose_hint", 1, &GridPuzzleProviderNodelet::onHint, this);
     saved_pose_ = std::make_unique<SavedPoseWriter>(nh, pnh, config_.save_pose_rate);
     if (const std::optional<XyzRpy> saved = readSavedPose(pnh, getName())) {
       NODELET_INFO("%s: serves the window around (%.2f, %.2f), the pose saved in ~last_pose, until a pose arrives",
@@ -94,6 +95,7 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
       resume.y = (*saved)(1);
       resume.yaw = (*saved)(5);
       latest_ = resume;
+      posed_ = true;
     }
     worker_ = std::thread(&GridPuzzleProviderNodelet::run, this);
   }
@@ -140,10 +142,47 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
     return false;
   }
 
+  // A coarse position (GNSS) before any pose: the window holds the localizer's search around it.
+  void onHint(const geometry_msgs::PoseWithCovarianceStamped::ConstPtr& msg) {
+    if (!msg->header.frame_id.empty() && msg->header.frame_id != config_.map_frame) {
+      NODELET_ERROR("initialpose_hint is in frame '%s' but map_frame is '%s'; ignored: send the hint in the map frame",
+                    msg->header.frame_id.c_str(), config_.map_frame.c_str());
+      return;
+    }
+    const geometry_msgs::Point& p = msg->pose.pose.position;
+    const std::optional<LostSearchRegion> region =
+        hintRegion(p.x, p.y, msg->pose.covariance[0], msg->pose.covariance[7], msg->header.stamp.toSec());
+    if (!region) {
+      NODELET_ERROR(
+          "initialpose_hint ignored: its position (%g, %g) is not finite; send x and y in metres in the map "
+          "frame",
+          p.x, p.y);
+      return;
+    }
+    {
+      std::lock_guard<std::mutex> lock(server_mutex_);
+      if (server_ && !server_->touchesMap(*region)) {
+        const TileBox m = server_->tiles().directory().bounds;
+        NODELET_ERROR(
+            "initialpose_hint (%.1f, %.1f) m (search radius %.1f m) lies outside the map, which spans x "
+            "%.0f..%.0f m, y %.0f..%.0f m; ignored: check the hint's frame and origin",
+            p.x, p.y, region->radius, m.i_min * s_, (m.i_max + 1) * s_, m.j_min * s_, (m.j_max + 1) * s_);
+        return;
+      }
+    }
+    {
+      std::lock_guard<std::mutex> lock(input_mutex_);
+      if (posed_) return;  // the localizer has a pose: its own search uses the hint
+      search_ = region;
+    }
+    input_ready_.notify_one();
+  }
+
   void offer(const PoseSample& pose) {
     {
       std::lock_guard<std::mutex> lock(input_mutex_);
       latest_ = pose;
+      posed_ = true;
     }
     input_ready_.notify_one();
   }
@@ -179,6 +218,7 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
       }
       followDirectory();
       if (search) coverSearch(*search);
+      maybeServeWholeMap();
       if (pose) {
         if (config_.save_pose_rate > 0.0)
           saved_pose_->set((XyzRpy() << pose->x, pose->y, 0.0, 0.0, 0.0, pose->yaw.value_or(0.0)).finished(), pose->t);
@@ -268,6 +308,37 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
     else if (!store_reachable_)
       NODELET_INFO("map store %s reachable (index revision %s)", status.url.c_str(), status.revision.c_str());
     store_reachable_ = status.reachable;
+  }
+
+  // With no pose and no hint start/search_timeout after start-up: the whole map, for the localizer's global search.
+  void maybeServeWholeMap() {
+    const double timeout = config_.start_search_timeout;
+    {
+      std::lock_guard<std::mutex> lock(input_mutex_);
+      if (posed_ || whole_map_tried_ || timeout <= 0.0) return;
+    }
+    if (std::chrono::duration<double>(std::chrono::steady_clock::now() - started_).count() < timeout) return;
+    const auto start = std::chrono::steady_clock::now();
+    std::optional<Served> served;
+    double area = 0.0;
+    {
+      std::lock_guard<std::mutex> lock(server_mutex_);
+      if (server_->searching()) return;  // a hint's search is served
+      whole_map_tried_ = true;
+      area = server_->mapArea();
+      if (area <= config_.start_max_area) served = server_->onWholeMap();
+    }
+    if (area > config_.start_max_area) {
+      NODELET_WARN(
+          "no pose and no hint %.1f s after start-up, and the map (%.2f km^2) is larger than start/max_area "
+          "(%.2f km^2): waiting for initialpose or initialpose_hint",
+          timeout, area / 1e6, config_.start_max_area / 1e6);
+      return;
+    }
+    if (!served) return;
+    NODELET_WARN("no pose and no hint %.1f s after start-up: serving the whole map (%.2f km^2) for the global search",
+                 timeout, area / 1e6);
+    publish(*served, start);
   }
 
   // Serves the window that holds the lost localizer's search region.
@@ -400,13 +471,16 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
   std::optional<PoseSample> latest_;
   std::optional<LostSearchRegion> search_;
   bool tracking_again_ = false;
+  bool posed_ = false;  // a pose came (or was saved): hints and the whole-map start no longer apply
   bool stop_ = false;
+  bool whole_map_tried_ = false;  // worker only
+  const std::chrono::steady_clock::time_point started_ = std::chrono::steady_clock::now();
   std::thread worker_;
 
   std::unique_ptr<ProviderMapCloud> map_cloud_;
   std::unique_ptr<SavedPoseWriter> saved_pose_;  // ~last_pose
   ros::Publisher delta_pub_, status_pub_;
-  ros::Subscriber pose_sub_, initial_pose_sub_, status_sub_;
+  ros::Subscriber pose_sub_, initial_pose_sub_, status_sub_, hint_sub_;
   ros::ServiceServer resend_srv_;
 };
 

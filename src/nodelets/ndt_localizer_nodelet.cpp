@@ -25,6 +25,7 @@
 #include "grid_puzzle_localization/GlobalLocalize.h"
 #include "grid_puzzle_localization/TileDelta.h"
 #include "grid_puzzle_localization/localizer.hpp"
+#include "grid_puzzle_localization/provider/window.hpp"
 #include "grid_puzzle_localization/rpy.hpp"
 #include "imu_msg.hpp"
 #include "latest_scan_slot.hpp"
@@ -61,17 +62,17 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     // it waits for initialpose or searches around the pose it saved in ~last_pose (global_localization/*).
     if (params_.initial_pose) pnh.deleteParam("initial_pose");
     if (params_.last_pose && !params_.initial_pose) {
-      hint_ = params_.last_pose->translation().head<2>();  // an initialpose_hint message replaces it
+      hint_ = Hint{params_.last_pose->translation().head<2>(), 0.0};  // an initialpose_hint message replaces it
       if (params_.global_localization.auto_start_timeout > 0.0)
         NODELET_INFO(
             "no pose yet: resumes searching around (%.2f, %.2f), the last pose saved in ~last_pose, %.1f s "
             "after the first scan unless initialpose comes",
-            hint_->x(), hint_->y(), params_.global_localization.auto_start_timeout);
+            hint_->xy.x(), hint_->xy.y(), params_.global_localization.auto_start_timeout);
       else
         NODELET_INFO(
             "the last pose saved in ~last_pose, (%.2f, %.2f), is the hint of a global search; none starts "
             "by itself (global_localization/auto_start_timeout is 0)",
-            hint_->x(), hint_->y());
+            hint_->xy.x(), hint_->xy.y());
     }
     localizer_->map().setTileCacheMb(params_.tile_cache_mb);
 
@@ -131,8 +132,8 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
 
   bool checkMapFrame(const std::string& frame, const char* topic) {
     if (frame.empty() || frame == params_.map_frame) return true;
-    NODELET_ERROR_THROTTLE(5.0, "%s is in frame '%s' but ~map_frame is '%s'; publish the map in the map frame", topic,
-                           frame.c_str(), params_.map_frame.c_str());
+    NODELET_ERROR_THROTTLE(5.0, "%s is in frame '%s' but ~map_frame is '%s'; ignored: publish it in the map frame",
+                           topic, frame.c_str(), params_.map_frame.c_str());
     return false;
   }
 
@@ -248,25 +249,61 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     publish(out, msg->header);
   }
 
-  // Starts a global search when no initial pose came within global_localization/auto_start_timeout.
+  // Starts a global search when an initialpose_hint came while no pose is known (again every lost/search_period
+  // until one is found), or when no initial pose came within global_localization/auto_start_timeout.
   void maybeStartGlobalLocalization(const ros::Time& stamp) {
-    if (!global_search_timer_.due(stamp.toSec())) return;
+    const double t = stamp.toSec();
+    const bool hinted = hint_due_ && (!last_hint_search_ || t - *last_hint_search_ >= params_.core.lost.search_period ||
+                                      t < *last_hint_search_);
+    if (!hinted && !global_search_timer_.due(t)) return;
     GlobalLocalize::Request req;
     GlobalLocalize::Response res;
-    const std::optional<Eigen::Vector2d> centre = hint_ ? hint_ : params_.global_localization.center;
+    const std::optional<Eigen::Vector2d> centre = hint_ ? hint_->xy : params_.global_localization.center;
     if (centre) {
       req.use_center = true;
       req.center_x = centre->x();
       req.center_y = centre->y();
+      // A hint's square reaches as far as its covariance says, at least global_localization/size.
+      if (hint_) req.size = std::max(params_.global_localization.size, hint_->size);
     }
+    if (hinted) last_hint_search_ = t;
     onGlobalLocalize(req, res);
-    if (!res.success) global_search_timer_.failed(stamp.toSec());  // try again after another timeout
+    if (res.success)
+      hint_due_ = false;
+    else
+      global_search_timer_.failed(t);  // try again after another timeout
   }
 
   void onHint(const geometry_msgs::PoseWithCovarianceStamped::ConstPtr& msg) {
     if (!checkMapFrame(msg->header.frame_id, "initialpose_hint")) return;
-    const Eigen::Vector2d xy(msg->pose.pose.position.x, msg->pose.pose.position.y);
-    if (xy.allFinite()) hint_ = xy;
+    const geometry_msgs::Point& p = msg->pose.pose.position;
+    const std::optional<LostSearchRegion> region =
+        hintRegion(p.x, p.y, msg->pose.covariance[0], msg->pose.covariance[7], msg->header.stamp.toSec());
+    if (!region) {
+      NODELET_ERROR(
+          "initialpose_hint ignored: its position (%g, %g) is not finite; send x and y in metres in the map "
+          "frame",
+          p.x, p.y);
+      return;
+    }
+    // With tiles the loaded map is only the provider's window: the provider checks a hint against the whole map.
+    const std::optional<Eigen::AlignedBox3d> box =
+        params_.map_source == "tiles" ? std::nullopt : localizer_->mapBounds();
+    if (box && (p.x + region->radius < box->min().x() || p.x - region->radius > box->max().x() ||
+                p.y + region->radius < box->min().y() || p.y - region->radius > box->max().y())) {
+      NODELET_ERROR(
+          "initialpose_hint (%.1f, %.1f) m (search radius %.1f m) lies outside the map, which spans x "
+          "%.0f..%.0f m, y %.0f..%.0f m; ignored: check the hint's frame and origin",
+          p.x, p.y, region->radius, box->min().x(), box->max().x(), box->min().y(), box->max().y());
+      return;
+    }
+    hint_ = Hint{Eigen::Vector2d(p.x, p.y), 2.0 * region->radius};
+    if (!localizer_->lastAcceptedPose()) {
+      hint_due_ = true;  // searched at the next scan that waits for a pose
+      last_hint_search_.reset();
+    }
+    NODELET_INFO("initialpose_hint (%.1f, %.1f) m, search radius %.1f m%s", p.x, p.y, region->radius,
+                 hint_due_ ? ": global search at the next scan" : "");
   }
 
   // The search region of a request: see srv/GlobalLocalize.srv.
@@ -368,7 +405,13 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   int map_replacements_seen_ = 0;                          // scan thread: map_replacements_ at the last map swap
   WarningThrottle fusion_warnings_{5.0};                   // scan thread
   GlobalSearchTimer global_search_timer_{0.0};             // scan thread; set from the parameters in onInit
-  std::optional<Eigen::Vector2d> hint_;  // last initialpose_hint, else the saved ~last_pose (map frame)
+  struct Hint {
+    Eigen::Vector2d xy;  // [m] map frame
+    double size = 0.0;   // [m] side of the square its covariance covers (0: none given)
+  };
+  std::optional<Hint> hint_;                // last initialpose_hint, else the saved ~last_pose; scan thread
+  bool hint_due_ = false;                   // a hint came while no pose is known: search around it
+  std::optional<double> last_hint_search_;  // [s] scan stamp of the last search around it
   LatestScanSlot<sensor_msgs::PointCloud2::ConstPtr> scan_slot_;  // points (MT queue) -> scan thread
   std::uint64_t warned_drops_ = 0;                                // scan thread only
   std::unique_ptr<SavedPoseWriter> saved_pose_;                   // ~last_pose

@@ -35,6 +35,8 @@ ProviderConfig loadProviderConfig(const ros::NodeHandle& pnh) {
   load(pnh, "window/lookahead_time", c.window.lookahead_time);
   load(pnh, "window/preset", c.window.preset);
   load(pnh, "lost/max_half_side", c.lost_max_half_side);
+  load(pnh, "start/search_timeout", c.start_search_timeout);
+  load(pnh, "start/max_area", c.start_max_area);
   load(pnh, "pose_source", c.pose_source);
   load(pnh, "publish_map_cloud", c.publish_map_cloud);
   load(pnh, "map_cloud_period", c.map_cloud_period);

@@ -2,8 +2,9 @@
 // test_window_server_equality.py can hold the C++ WindowServer (the provider nodelet's) equal to the Python one
 // (the rospy provider's). First line: {"dir": DIR, "grid_size": S, "max_half_side": M, "window": {n, k,
 // update_distance, heading_source, lookahead_time, preset}}; then one command a line: {"pose": {x, y, t, yaw,
-// velocity}}, {"search": {x, y, radius, t}}, {"end_search": true} or {"whole": true}. With --defaults it prints the
-// provider nodelet's parameter defaults as {"group/name": value} (test_provider_config holds them equal to Python's).
+// velocity}}, {"search": {x, y, radius, t}}, {"end_search": true}, {"whole": true} or {"whole_map": true}. With
+// --defaults it prints the provider nodelet's parameter defaults as {"group/name": value} (test_provider_config holds
+// them equal to Python's).
 #include <cmath>
 #include <iostream>
 #include <nlohmann/json.hpp>
@@ -57,6 +58,8 @@ json providerDefaults() {
           {"window/lookahead_time", c.window.lookahead_time},
           {"window/preset", c.window.preset},
           {"lost/max_half_side", c.lost_max_half_side},
+          {"start/search_timeout", c.start_search_timeout},
+          {"start/max_area", c.start_max_area},
           {"pose_source", c.pose_source},
           {"publish_map_cloud", c.publish_map_cloud},
           {"map_cloud_period", c.map_cloud_period},
@@ -100,6 +103,8 @@ int main(int argc, char** argv) {
       out = servedJson(server.onSearch({r.at("x"), r.at("y"), r.at("radius"), r.at("t")}), s);
     } else if (cmd.contains("end_search")) {
       server.endSearch();
+    } else if (cmd.contains("whole_map")) {
+      out = servedJson(server.onWholeMap(), s);
     } else if (cmd.contains("whole")) {
       const auto whole = server.whole();
       if (whole) {

@@ -80,7 +80,8 @@ def make_tile_dir(root: Path, s: float, source: str, rng: random.Random) -> Path
 
 def random_commands(s: float, rng: random.Random) -> list[dict]:
     """A random drive: steps below and above the update distance, turns, stops, jumps, headings on the Table I
-    boundaries, yaws and velocities sometimes missing, lost searches and their end, and whole-window resends."""
+    boundaries, yaws and velocities sometimes missing, lost searches and their end, whole-window resends and the whole
+    map of a start without a pose."""
     x, y, t, heading = rng.uniform(-40, 40) * s, rng.uniform(-40, 40) * s, 0.0, rng.uniform(-math.pi, math.pi)
     commands: list[dict] = []
     poses = 0
@@ -96,7 +97,8 @@ def random_commands(s: float, rng: random.Random) -> list[dict]:
             commands.append({"end_search": True})
             continue
         if roll < 0.06:
-            commands.append({"whole": True})
+            # The whole map is held until the localizer tracks: ended at once, so the drive goes on serving windows.
+            commands.extend([{"whole_map": True}, {"end_search": True}] if roll < 0.052 else [{"whole": True}])
             continue
         if roll < 0.25:
             heading = math.radians(rng.choice(BOUNDARY_DEGREES))
@@ -155,6 +157,8 @@ def reference_outputs(tile_dir: Path, s: float, config: WindowConfig, max_half_s
         elif "end_search" in cmd:
             server.end_search()
             outputs.append(None)
+        elif "whole_map" in cmd:
+            outputs.append(served_json(server.on_whole_map()))
         else:
             whole = server.whole()
             if whole is None:

@@ -85,6 +85,7 @@ class WindowTracker {
   const std::optional<Window>& window() const { return window_; }
   const WindowConfig& config() const { return config_; }
   double updateDistance() const { return update_distance_; }
+  double s() const { return s_; }
 
  private:
   std::array<double, 2> lookaheadPoint(const PoseSample& pose) const;
@@ -104,6 +105,13 @@ struct LostSearchRegion {
   double x = 0.0, y = 0.0, radius = 0.0, t = 0.0;
 };
 
+/// A hint's search region reaches this many standard deviations of its position (lost_search.py's HINT_SIGMAS).
+constexpr double kHintSigmas = 3.0;
+/// The search region of a coarse position (`initialpose_hint`): kHintSigmas standard deviations of the larger of its
+/// variances [m^2] around it (radius 0 when they are not finite and positive); nullopt for a position that is not
+/// finite.
+std::optional<LostSearchRegion> hintRegion(double x, double y, double variance_x, double variance_y, double t);
+
 /// The window while the localizer is lost (lost_search.py's LostSearchWindow): the union of the pose's window and
 /// the square of half side (search radius + reach), rounded up to kSearchStep and at most max_half_side.
 class LostSearchWindow {
@@ -121,6 +129,8 @@ class LostSearchWindow {
     return was;
   }
   bool active() const { return active_; }
+  /// A window that is not the pose's (the whole map of a start without a pose) is served until the localizer tracks.
+  void hold() { active_ = true; }
 
  private:
   double max_half_side_, reach_, s_;

@@ -30,6 +30,13 @@ class WindowServer {
   }
   /// The window holding the lost localizer's search region, or nullopt when it is served already.
   std::optional<Served> onSearch(const LostSearchRegion& region);
+  /// Every tile of the directory, for the global search of a start without a pose or a hint, or nullopt when it is
+  /// served already (or the directory is empty). Like a search's window it stays until the localizer tracks.
+  std::optional<Served> onWholeMap();
+  /// True when the square of half side `region.radius` around its centre meets the directory's tiles' box.
+  bool touchesMap(const LostSearchRegion& region) const;
+  /// [m^2] of the directory's bounding box of tiles.
+  double mapArea() const;
   /// The window after `pose`, or nullopt when it stays (not moved far enough, or a search's window is served).
   std::optional<Served> onPose(const PoseSample& pose);
   /// True when the tile directory was rewritten (a new index revision): the whole window is due as a reset. Throws

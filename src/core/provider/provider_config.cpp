@@ -17,6 +17,12 @@ ProviderConfig ProviderConfig::checked() const {
   if (!(std::isfinite(lost_max_half_side) && lost_max_half_side >= 0.0))
     throw std::invalid_argument("parameter lost/max_half_side must be >= 0 m (got " +
                                 std::to_string(lost_max_half_side) + "); 0 = off");
+  if (!(std::isfinite(start_search_timeout) && start_search_timeout >= 0.0))
+    throw std::invalid_argument("parameter start/search_timeout must be >= 0 s (got " +
+                                std::to_string(start_search_timeout) + "); 0 = off");
+  if (!(std::isfinite(start_max_area) && start_max_area > 0.0))
+    throw std::invalid_argument("parameter start/max_area must be > 0 m^2 (got " + std::to_string(start_max_area) +
+                                ")");
   if (!(std::isfinite(save_pose_rate) && save_pose_rate >= 0.0))
     throw std::invalid_argument("parameter save_pose_rate must be >= 0 Hz (got " + std::to_string(save_pose_rate) +
                                 "); 0 = off");

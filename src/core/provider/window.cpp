@@ -168,6 +168,13 @@ std::vector<Window> WindowTracker::predictedWindows() const {
   return out;
 }
 
+std::optional<LostSearchRegion> hintRegion(double x, double y, double variance_x, double variance_y, double t) {
+  if (!std::isfinite(x) || !std::isfinite(y)) return std::nullopt;
+  const double variance = std::max(variance_x, variance_y);
+  const double radius = std::isfinite(variance) && variance > 0.0 ? kHintSigmas * std::sqrt(variance) : 0.0;
+  return LostSearchRegion{x, y, radius, t};
+}
+
 std::optional<Window> LostSearchWindow::cover(const LostSearchRegion& region, const std::optional<Window>& pose_window,
                                               const std::optional<TileBox>& served) {
   const double half_side = std::min(std::ceil((region.radius + reach_) / kSearchStep) * kSearchStep, max_half_side_);

@@ -18,6 +18,34 @@ std::optional<Served> WindowServer::onSearch(const LostSearchRegion& region) {
   return serve(centre, *window);
 }
 
+std::optional<Served> WindowServer::onWholeMap() {
+  const TileBox b = tiles_.directory().bounds;
+  if (b.empty()) return std::nullopt;
+  const double s = tracker_.s();
+  PoseSample centre;
+  centre.x = static_cast<double>(b.i_min + b.i_max + 1) * s / 2;
+  centre.y = static_cast<double>(b.j_min + b.j_max + 1) * s / 2;
+  const double half_side = static_cast<double>(std::max(b.i_max - b.i_min + 1, b.j_max - b.j_min + 1)) * s / 2;
+  const Window window = windowCovering(std::nullopt, centre.x, centre.y, half_side, s);
+  if (window_ && window.bounds() == window_->bounds()) return std::nullopt;
+  lost_.hold();
+  return serve(centre, window);
+}
+
+bool WindowServer::touchesMap(const LostSearchRegion& region) const {
+  const TileBox b = tiles_.directory().bounds;
+  const double s = tracker_.s(), r = region.radius;
+  return static_cast<double>(b.i_min) * s <= region.x + r && region.x - r <= static_cast<double>(b.i_max + 1) * s &&
+         static_cast<double>(b.j_min) * s <= region.y + r && region.y - r <= static_cast<double>(b.j_max + 1) * s;
+}
+
+double WindowServer::mapArea() const {
+  const TileBox b = tiles_.directory().bounds;
+  if (b.empty()) return 0.0;
+  const double s = tracker_.s();
+  return static_cast<double>(b.i_max - b.i_min + 1) * static_cast<double>(b.j_max - b.j_min + 1) * s * s;
+}
+
 std::optional<Served> WindowServer::onPose(const PoseSample& pose) {
   if (lost_.active()) return std::nullopt;  // while the localizer is lost its pose is a prediction
   const std::optional<Window> window = tracker_.update(pose);

@@ -31,10 +31,22 @@ class LostConfig:
 
 
 @dataclass(frozen=True)
+class StartConfig:
+    """A start with no pose: none given, none saved in ~last_pose, and no hint on `initialpose_hint` (a hint alone is
+    served as a search region of three standard deviations around it)."""
+
+    # [s] >= 0; this long after start-up the whole map is served for the localizer's global search (set it with the
+    # localizer's global_localization/auto_start_timeout); 0 = never
+    search_timeout: float = 0.0
+    max_area: float = 1.0e6  # [m^2] > 0; a larger map is not served whole: it needs a pose or a hint
+
+
+@dataclass(frozen=True)
 class ProviderConfig:
     tiles: TilesConfig = field(default_factory=TilesConfig)
     window: WindowConfig = field(default_factory=WindowConfig)
     lost: LostConfig = field(default_factory=LostConfig)
+    start: StartConfig = field(default_factory=StartConfig)
     pose_source: str = "odom"  # odom: nav_msgs/Odometry on `odom`; pose: PoseWithCovarianceStamped on `pose`
     publish_map_cloud: bool = False  # publish the merged window on the latched `map_cloud` (read while subscribed)
     map_cloud_period: float = 1.0  # [s] publish map_cloud at most this often (the latest window); 0 = every change
@@ -53,6 +65,10 @@ class ProviderConfig:
             raise UserError(f"parameter map_cloud_period must be >= 0 s (got {self.map_cloud_period})")
         if not (math.isfinite(self.lost.max_half_side) and self.lost.max_half_side >= 0.0):
             raise UserError(f"parameter lost/max_half_side must be >= 0 m (got {self.lost.max_half_side}); 0 = off")
+        if not (math.isfinite(self.start.search_timeout) and self.start.search_timeout >= 0.0):
+            raise UserError(f"parameter start/search_timeout must be >= 0 s (got {self.start.search_timeout}); 0 = off")
+        if not (math.isfinite(self.start.max_area) and self.start.max_area > 0.0):
+            raise UserError(f"parameter start/max_area must be > 0 m^2 (got {self.start.max_area})")
         if not (math.isfinite(self.save_pose_rate) and self.save_pose_rate >= 0.0):
             raise UserError(f"parameter save_pose_rate must be >= 0 Hz (got {self.save_pose_rate}); 0 = off")
         if self.pose_source not in POSE_SOURCES:

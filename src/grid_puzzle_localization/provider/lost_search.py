@@ -48,3 +48,17 @@ class LostSearchWindow:
         """The localizer tracks again; True when a search's window was being served (the pose takes over)."""
         was, self.active = self.active, False
         return was
+
+
+HINT_SIGMAS = 3.0  # a hint's search region reaches this many standard deviations of its position
+
+
+def hint_region(x: float, y: float, variance_x: float, variance_y: float, t: float) -> SearchRegion:
+    """The search region of a coarse position (``initialpose_hint``): HINT_SIGMAS standard deviations of the larger of
+    its variances [m^2] around it (radius 0 when they are not finite and positive). Raises ValueError for a position
+    that is not finite."""
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise ValueError(f"its position ({x}, {y}) is not finite")
+    variance = max(variance_x, variance_y)
+    radius = HINT_SIGMAS * math.sqrt(variance) if math.isfinite(variance) and variance > 0.0 else 0.0
+    return SearchRegion(x, y, radius, t)

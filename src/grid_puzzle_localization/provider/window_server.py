@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 from grid_puzzle_localization.provider.lost_search import LostSearchWindow, SearchRegion
 from grid_puzzle_localization.provider.tile_references import ReferenceDelta, TileReferences
-from grid_puzzle_localization.provider.window import PoseSample, Window, WindowTracker
+from grid_puzzle_localization.provider.window import PoseSample, Window, WindowTracker, window_covering
 
 
 @dataclass(frozen=True)
@@ -42,6 +42,36 @@ class WindowServer:
         """The window holding the lost localizer's search region, or None when it is served already."""
         window = self.lost.cover(region, self.tracker.window, self.window)
         return None if window is None else self._serve(PoseSample(region.x, region.y, region.t), window)
+
+    def on_whole_map(self, t: float = 0.0) -> Served | None:
+        """Every tile of the directory, for the global search of a start without a pose or a hint, or None when it is
+        served already (or the directory is empty). Like a search's window it stays until the localizer tracks."""
+        i0, i1, j0, j1 = self.tiles.directory.bounds
+        if i0 > i1 or j0 > j1:
+            return None
+        s = self.tracker.s
+        x, y = (i0 + i1 + 1) * s / 2, (j0 + j1 + 1) * s / 2
+        window = window_covering(None, x, y, max(i1 - i0 + 1, j1 - j0 + 1) * s / 2, s)
+        if self.window is not None and window.bounds == self.window.bounds:
+            return None
+        self.lost.active = True
+        return self._serve(PoseSample(x, y, t), window)
+
+    def touches_map(self, region: SearchRegion) -> bool:
+        """True when the square of half side ``region.radius`` around its centre meets the directory's tiles' box."""
+        i0, i1, j0, j1 = self.tiles.directory.bounds
+        s, r = self.tracker.s, region.radius
+        return (
+            i0 * s <= region.x + r
+            and region.x - r <= (i1 + 1) * s
+            and j0 * s <= region.y + r
+            and region.y - r <= (j1 + 1) * s
+        )
+
+    def map_area(self) -> float:
+        """[m^2] of the directory's bounding box of tiles."""
+        i0, i1, j0, j1 = self.tiles.directory.bounds
+        return max(0, i1 - i0 + 1) * max(0, j1 - j0 + 1) * self.tracker.s**2
 
     def on_pose(self, pose: PoseSample) -> Served | None:
         """The window after ``pose``, or None when it stays (not moved far enough, or a search's window is served:

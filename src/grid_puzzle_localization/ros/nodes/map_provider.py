@@ -34,7 +34,7 @@ from std_srvs.srv import Trigger, TriggerResponse
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.msg import NdtStatus, ProviderStatus, TileDelta
 from grid_puzzle_localization.provider.config import ProviderConfig, load_config
-from grid_puzzle_localization.provider.lost_search import SearchRegion
+from grid_puzzle_localization.provider.lost_search import SearchRegion, hint_region
 from grid_puzzle_localization.provider.tile_references import TileReferences
 from grid_puzzle_localization.provider.window import PoseSample, Window, WindowTracker
 from grid_puzzle_localization.provider.window_server import Served, WindowServer
@@ -81,6 +81,9 @@ class MapProviderNode:
         self._latest: PoseSample | None = None
         self._search: SearchRegion | None = None  # the lost localizer's latest search region
         self._tracking_again = False  # the localizer tracks again after a loss
+        self._posed = False  # a pose came (or was saved): hints and the whole-map start no longer apply
+        self._started = time.monotonic()
+        self._whole_map_tried = False
         self._pose_ready = threading.Condition()
 
         self.delta_pub = rospy.Publisher(
@@ -104,12 +107,14 @@ class MapProviderNode:
             rospy.Subscriber("pose", PoseWithCovarianceStamped, self._on_pose, queue_size=1)
         if self.config.lost.max_half_side > 0.0:
             rospy.Subscriber("localizer_status", NdtStatus, self._on_localizer_status, queue_size=1)
+        rospy.Subscriber("initialpose_hint", PoseWithCovarianceStamped, self._on_hint, queue_size=1)
         self._saved_pose = SavedPoseWriter(self.config.save_pose_rate)
         saved = read_saved_pose()
         if saved is not None:
             # A respawn: the window is served at the pose the killed process saved until a pose arrives.
             rospy.loginfo("serves the window around (%.2f, %.2f), the pose saved in ~last_pose", saved[0], saved[1])
             self._latest = PoseSample(saved[0], saved[1], 0.0, saved[5])
+            self._posed = True
         self._worker = threading.Thread(target=self._run, name="map_provider_worker", daemon=True)
         self._worker.start()
         rospy.loginfo(
@@ -140,6 +145,41 @@ class MapProviderNode:
             self._tracking_again = True
         self._on_pose(msg)
 
+    def _on_hint(self, msg: PoseWithCovarianceStamped) -> None:
+        """A coarse position (GNSS) before any pose: the window holds the localizer's search around it."""
+        if msg.header.frame_id not in ("", self.frame):
+            rospy.logerr(
+                "initialpose_hint is in frame '%s' but map_frame is '%s'; ignored: send the hint in the map frame",
+                msg.header.frame_id,
+                self.frame,
+            )
+            return
+        p, c = msg.pose.pose.position, msg.pose.covariance
+        try:
+            region = hint_region(p.x, p.y, c[0], c[7], msg.header.stamp.to_sec())
+        except ValueError as err:
+            rospy.logerr("initialpose_hint ignored: %s; send x and y in metres in the map frame", err)
+            return
+        if not self.server.touches_map(region):
+            i0, i1, j0, j1 = self.server.tiles.directory.bounds
+            rospy.logerr(
+                "initialpose_hint (%.1f, %.1f) m (search radius %.1f m) lies outside the map, which spans"
+                " x %.0f..%.0f m, y %.0f..%.0f m; ignored: check the hint's frame and origin",
+                p.x,
+                p.y,
+                region.radius,
+                i0 * self.s,
+                (i1 + 1) * self.s,
+                j0 * self.s,
+                (j1 + 1) * self.s,
+            )
+            return
+        with self._pose_ready:
+            if self._posed:
+                return  # the localizer has a pose: its own search uses the hint
+            self._search = region
+            self._pose_ready.notify()
+
     def _on_localizer_status(self, msg: NdtStatus) -> None:
         with self._pose_ready:
             if msg.lost and msg.search_radius > 0.0:
@@ -163,6 +203,7 @@ class MapProviderNode:
     def _offer(self, pose: PoseSample) -> None:
         with self._pose_ready:
             self._latest = pose
+            self._posed = True
             self._pose_ready.notify()
 
     def _on_resend(self, _req) -> TriggerResponse:
@@ -186,6 +227,7 @@ class MapProviderNode:
             self._follow_directory()
             if search is not None:
                 self._cover_search(search)
+            self._maybe_serve_whole_map()
             if pose is not None:
                 self._saved_pose.set([pose.x, pose.y, 0.0, 0.0, 0.0, pose.yaw or 0.0], pose.t)
                 start = time.perf_counter()
@@ -212,6 +254,35 @@ class MapProviderNode:
                 region.y,
             )
         self._publish(served, start)
+
+    def _maybe_serve_whole_map(self) -> None:
+        """With no pose and no hint start/search_timeout after start-up: the whole map, for the global search."""
+        timeout = self.config.start.search_timeout
+        with self._pose_ready:
+            due = not (self._posed or self._whole_map_tried or self.server.lost.active)
+        if not due or timeout <= 0.0 or time.monotonic() - self._started < timeout:
+            return
+        self._whole_map_tried = True
+        area = self.server.map_area()
+        if area > self.config.start.max_area:
+            rospy.logwarn(
+                "no pose and no hint %.1f s after start-up, and the map (%.2f km^2) is larger than start/max_area"
+                " (%.2f km^2): waiting for initialpose or initialpose_hint",
+                timeout,
+                area / 1e6,
+                self.config.start.max_area / 1e6,
+            )
+            return
+        start = time.perf_counter()
+        with self._lock:
+            served = self.server.on_whole_map()
+        if served is not None:
+            rospy.logwarn(
+                "no pose and no hint %.1f s after start-up: serving the whole map (%.2f km^2) for the global search",
+                timeout,
+                area / 1e6,
+            )
+            self._publish(served, start)
 
     def _follow_directory(self) -> None:
         """Sends the whole window again when the tile directory was rewritten (new index revision)."""
