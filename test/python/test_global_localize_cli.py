@@ -97,3 +97,29 @@ def test_errors_name_the_input(capsys, street, tmp_path):
     write_pcd(empty, xyz_records(np.zeros((0, 3), dtype=np.float32)))
     code, answer, err = localize(capsys, "--map", str(root / "map.pcd"), "--scan", str(empty), "--center", "40", "0")
     assert code == 1 and not answer["found"] and "no finite points" in err
+
+
+def test_tile_directory_by_url_gives_the_same_pose_and_a_dead_server_is_named(capsys, street, tmp_path, monkeypatch):
+    from fixtures import nginx_server
+
+    if nginx_server.binary() is None:
+        pytest.skip("nginx is not installed (nginx-light)")
+    root, truth = street
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))  # the map store's disk cache
+    server = nginx_server.NginxServer(root)
+    server.start()
+    try:
+        url = server.url("/tiles")
+        args = ["--scan", str(root / "scan.pcd"), "--threads", "2", "--center", "50", "-6", "--size", "30"]
+        code, by_url, err = localize(capsys, "--map", url, *args)
+        assert code == 0, err
+        assert_at(by_url, truth)
+        code, by_path, err = localize(capsys, "--map", str(root / "tiles"), *args)
+        assert (by_url["x"], by_url["y"], by_url["yaw"]) == (by_path["x"], by_path["y"], by_path["yaw"])
+        assert by_url["tiles_loaded"] == by_path["tiles_loaded"]
+    finally:
+        server.close()
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "empty_cache"))
+    code, answer, err = localize(capsys, "--map", url, *args)
+    assert code == 2 and answer is None
+    assert f"{url}/index.json" in err and "holds no index" in err, err

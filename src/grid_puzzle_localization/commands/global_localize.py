@@ -1,8 +1,9 @@
 """`gpm global-localize`: finds a scan's pose on a map without an initial guess (branch-and-bound search
-over x, y and yaw, then NDT; the block map paper's pose initialization). The map is a tile directory, a
-PCD file or a block directory; of a tile or block directory only the files covering the search square
-(plus the scan's reach) are loaded. The search itself is the C++ ``global_localize`` program of the
-package; this command picks the files and prints its answer as one JSON line."""
+over x, y and yaw, then NDT; the block map paper's pose initialization). The map is a tile directory (or its
+http(s):// URL, a map store: docs/map_store.md), a PCD file or a block directory; of a tile or block directory only
+the files covering the search square (plus the scan's reach) are loaded (fetched into the map store's cache).
+The search itself is the C++ ``global_localize`` program of the package; this command picks the files and prints
+its answer as one JSON line."""
 
 from __future__ import annotations
 
@@ -22,12 +23,15 @@ from grid_puzzle_localization.blocks.store import read_block_index
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.tiles.directory import decode_key, open_tile_directory
 from grid_puzzle_localization.tiles.grid import tile_index
+from grid_puzzle_localization.tiles.map_store import MapStore, is_map_store_url
 
 PROGRAM = "global_localize"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--map", required=True, help="tile directory, map PCD file or block directory")
+    parser.add_argument(
+        "--map", required=True, help="tile directory (or its http(s):// URL), map PCD file or block directory"
+    )
     parser.add_argument("--scan", required=True, help="scan PCD (x y z in the base frame)")
     parser.add_argument("--center", nargs=2, type=float, metavar=("X", "Y"), help="centre of the search [m]")
     parser.add_argument("--size", type=float, help="edge of the searched square [m] (default: the program's, 40)")
@@ -66,9 +70,11 @@ def square(center: tuple[float, float], half: float) -> tuple[float, float, floa
     return center[0] - half, center[0] + half, center[1] - half, center[1] + half
 
 
-def tile_files(path: Path, grid_size: float | None, center: tuple[float, float] | None, half: float) -> MapFiles:
+def tile_files(
+    path: Path, grid_size: float | None, center: tuple[float, float] | None, half: float, name: str = ""
+) -> MapFiles:
     """The tiles that overlap the square of half side ``half`` around the centre (default: the middle of
-    the tiled area)."""
+    the tiled area). ``name`` names the map in errors (default: ``path``)."""
     directory = open_tile_directory(path, grid_size)
     s = directory.grid_size
     if center is None:
@@ -80,10 +86,29 @@ def tile_files(path: Path, grid_size: float | None, center: tuple[float, float] 
     if not keys:
         i_min, i_max, j_min, j_max = directory.bounds
         raise UserError(
-            f"no tiles of {path} around the search centre ({center[0]:g}, {center[1]:g}); the tiles span"
+            f"no tiles of {name or path} around the search centre ({center[0]:g}, {center[1]:g}); the tiles span"
             f" x {i_min * s:g}..{(i_max + 1) * s:g} m, y {j_min * s:g}..{(j_max + 1) * s:g} m: move --center"
         )
     return MapFiles([directory.tile_path(key) for key in keys], center)
+
+
+def url_tile_files(url: str, grid_size: float | None, center: tuple[float, float] | None, half: float) -> MapFiles:
+    """The tiles of the map at ``url`` around the search, fetched into the map store's cache (the defaults of
+    MapStoreConfig); the cached index of the revision in use picks them as a local index would."""
+    store = MapStore(url)
+    try:
+        around = tile_files(store.dir, grid_size, center, half, name=store.url)
+        stems = [f.name[: -len(".pcd")] for f in around.files]
+        fetched = store.fetch(stems)
+    finally:
+        store.close()
+    failed = [t.error for t in fetched if t.path is None]
+    if failed:
+        raise UserError(
+            f"{len(failed)} of the {len(fetched)} tiles of {store.url} around the search could not be fetched,"
+            f" e.g. {failed[0]}"
+        )
+    return MapFiles([t.path for t in fetched], around.center)
 
 
 def block_files(path: Path, center: tuple[float, float] | None, half: float) -> MapFiles:
@@ -106,8 +131,10 @@ def block_files(path: Path, center: tuple[float, float] | None, half: float) -> 
 
 
 def map_files(args: argparse.Namespace, half: float) -> MapFiles:
-    path = Path(args.map)
     center = tuple(args.center) if args.center else None
+    if is_map_store_url(args.map):
+        return url_tile_files(args.map, args.grid_size, center, half)
+    path = Path(args.map)
     if path.is_file():
         return MapFiles([path], center)
     if (path / BLOCK_INDEX).is_file():

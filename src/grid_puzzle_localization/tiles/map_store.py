@@ -1,5 +1,6 @@
 """A tiled map served over HTTP(S): the Python twin of the C++ MapStore (include/grid_puzzle_localization/
-map_store/map_store.hpp, docs/map_store.md), with the same checks, revision and disk cache layout. The server holds what `gpm tile` writes (index.json + <cx>_<cy>.pcd) under a URL prefix.
+map_store/map_store.hpp, docs/map_store.md), with the same checks, revision and disk cache layout. The server holds
+what `gpm tile` writes (index.json + <cx>_<cy>.pcd) under a URL prefix.
 
 HTTP is urllib3 (Debian's python3-urllib3, also in Ubuntu 20.04): one connection pool kept alive between fetches,
 connect and whole-request timeouts, certificate verification against the system CA store. Tiles are fetched on
