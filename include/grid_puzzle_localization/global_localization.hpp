@@ -42,6 +42,15 @@ struct GlobalLocalizationConfig {
   double yaw_step = 0.0;
   /// Pyramid levels above the finest one, 1..12; a coarse cell covers 2^levels fine cells.
   int levels = 6;
+  /// Work budget of one search: base positions times yaws at the finest level, (cells per side)^2 * yaws, in
+  /// [1000, 2^31 - 1]. A request over it (a larger square) is searched at resolution * 2^k with the smallest k that
+  /// fits, the yaw step and blur_sigma scaled by 2^k too (the same search in cells). The best 4 * (refine_candidates
+  /// + 1) coarse places (2 coarse cells or yaw steps apart) are then brought down to full resolution one level at a
+  /// time, searching 9 x 9 positions x 9 yaws (2 cells and 2 yaw steps of the level above on each side) per level,
+  /// and chosen among at full resolution before the NDT refinement. The default holds a 40 m square with the full
+  /// circle of yaw at 0.5 m (81^2 positions x at most 503 yaws, a scan reaching max_range: 3.3e6 poses), which runs
+  /// at full resolution as before; a 200 m square runs at 2 m, 1 km at 4 m.
+  int max_poses = 4000000;
   /// The block map paper's adapted initial score S0: greedy descents from the best coarse candidates set the
   /// pruning bound before the search. false = plain BBS (Hess et al. 2016) starting from min_score.
   bool adapted_initial_score = true;
@@ -120,9 +129,17 @@ struct GlobalLocalizationResult {
   double grid_seconds = 0.0;             ///< of which: likelihood grids and pyramid of the search area
   double search_seconds = 0.0;           ///< of which: the branch-and-bound search
   double refine_seconds = 0.0;           ///< of which: the NDT refinement of the candidates
-  std::size_t candidates_evaluated = 0;  ///< search nodes scored (all levels); varies with threads
-  std::size_t scan_points_used = 0;      ///< structure points of the scan the search matched
-  NdtResult refinement;                  ///< the NDT refinement of the winner (status INVALID_INPUT if not run)
+  std::size_t candidates_evaluated = 0;  ///< search nodes scored (all levels, all stages); varies with threads
+  /// [m] translation step of the search over the whole square: resolution * 2^k, the smallest k whose poses fit
+  /// max_poses (0 when the search did not run).
+  double search_resolution = 0.0;
+  /// Poses (positions x yaws) at the finest level of the search over the whole square, <= max_poses.
+  std::size_t search_poses = 0;
+  /// Poses of the searches that bring the coarse places down to full resolution (0 when the square was searched at
+  /// full resolution): 729 per place and level, at most 4 * (refine_candidates + 1) * 729 * k.
+  std::size_t local_poses = 0;
+  std::size_t scan_points_used = 0;  ///< structure points of the scan the search matched
+  NdtResult refinement;              ///< the NDT refinement of the winner (status INVALID_INPUT if not run)
   /// Of the refined scan's points that land on the map's area, the fraction within the NDT inlier gate, in [0, 1].
   double explained_fraction = 0.0;
 };

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <sstream>
 #include <stdexcept>
+#include <tuple>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -20,6 +21,8 @@ namespace {
 constexpr double kTwoPi = 2.0 * 3.14159265358979323846;
 /// [m] radius around a position whose ground cells give its ground height.
 constexpr double kGroundRadius = 8.0;
+/// A coarse search keeps this many distinct places per one refined by NDT, to be chosen among at full resolution.
+constexpr std::size_t kCoarseCandidatesPerRefined = 4;
 
 double wrapAngle(double a) { return std::remainder(a, kTwoPi); }
 
@@ -84,13 +87,13 @@ struct BandGrids {
   std::size_t occupied = 0;          ///< occupied cells, all bands
 };
 
-BandGrids bandGrids(const std::vector<StructurePoint>& map, const GlobalLocalizationConfig& cfg, double x0, double y0,
-                    int side) {
-  const double r = cfg.resolution;
+/// `r` [m] is the cell and `blur_sigma` [m] the likelihood spread (the search's, which may be coarser than cfg's).
+BandGrids bandGrids(const std::vector<StructurePoint>& map, const GlobalLocalizationConfig& cfg, double r,
+                    double blur_sigma, int levels, double x0, double y0, int side) {
   const int bands = static_cast<int>(cfg.height_bands.size()) - 1;
   BandGrids g;
   g.side = side;
-  g.stride = side + (1 << cfg.levels) + 1;
+  g.stride = side + (1 << levels) + 1;
   g.x0 = x0;
   g.y0 = y0;
   const int width = bands * g.stride;
@@ -111,13 +114,13 @@ BandGrids bandGrids(const std::vector<StructurePoint>& map, const GlobalLocaliza
   }
   g.occupied = cells.size();
   // The likelihood kernel, stamped (max) once per occupied cell and clipped to its band.
-  const int k = static_cast<int>(std::ceil(2.0 * cfg.blur_sigma / r));
+  const int k = static_cast<int>(std::ceil(2.0 * blur_sigma / r));
   std::vector<std::uint8_t> kernel(static_cast<std::size_t>(2 * k + 1) * (2 * k + 1), 255);
-  if (cfg.blur_sigma > 0.0)
+  if (blur_sigma > 0.0)
     for (int dy = -k; dy <= k; ++dy)
       for (int dx = -k; dx <= k; ++dx)
         kernel[static_cast<std::size_t>(dy + k) * (2 * k + 1) + dx + k] = static_cast<std::uint8_t>(
-            std::lround(255.0 * std::exp(-(dx * dx + dy * dy) * r * r / (2 * cfg.blur_sigma * cfg.blur_sigma))));
+            std::lround(255.0 * std::exp(-(dx * dx + dy * dy) * r * r / (2 * blur_sigma * blur_sigma))));
   for (const Eigen::Vector2i& c : cells) {
     const int band_x0 = (c.x() / g.stride) * g.stride;
     for (int dy = -k; dy <= k; ++dy)
@@ -129,6 +132,80 @@ BandGrids bandGrids(const std::vector<StructurePoint>& map, const GlobalLocaliza
       }
   }
   return g;
+}
+
+/// Yaws [rad] every `step` or less: over the full circle when `range` >= 2 pi, else over [centre - range / 2,
+/// centre + range / 2] ends included.
+std::vector<double> yawList(double centre, double range, double step) {
+  std::vector<double> yaws;
+  if (range >= kTwoPi - 1e-9) {
+    const int n = static_cast<int>(std::ceil(kTwoPi / step));
+    for (int i = 0; i < n; ++i) yaws.push_back(wrapAngle(centre + kTwoPi * i / n));
+  } else {
+    const int n = static_cast<int>(std::ceil(range / step)) + 1;
+    for (int i = 0; i < n; ++i) yaws.push_back(wrapAngle(centre - range / 2 + range * i / (n - 1)));
+  }
+  return yaws;
+}
+
+/// A pose of the search in the map frame.
+struct Candidate {
+  double x = 0, y = 0, yaw = 0;  ///< [m], [m], [rad]
+  std::int64_t score = 0;        ///< sum of likelihoods (255 per point on structure)
+};
+
+/// One branch-and-bound search over a square of base positions (corner x_lo, y_lo; `side` positions per side every
+/// `r` metres) and a list of yaws, on likelihood grids of cell `r` and spread `blur_sigma`.
+struct SquareSearch {
+  double x_lo = 0, y_lo = 0, r = 0, blur_sigma = 0;
+  int side = 0;
+  int levels = 1;  ///< pyramid levels above the finest
+  std::vector<double> yaws;
+  std::size_t poses() const { return static_cast<std::size_t>(side) * side * yaws.size(); }
+};
+
+/// Runs `s`; the leaves of `BbsOutcome` as candidates in the map frame, best first. False when no map structure lies
+/// within the scan's reach of the square (nothing searched). Adds the time of the grids and of the search.
+bool runSearch(const std::vector<StructurePoint>& map, const ScanStructure& points, const GlobalLocalizationConfig& cfg,
+               const SquareSearch& s, std::int64_t min_score, double ratio, std::vector<Candidate>* leaves,
+               std::size_t* evaluated, double* grid_seconds, double* search_seconds) {
+  auto stage = std::chrono::steady_clock::now();
+  auto lap = [&stage](double* seconds) {
+    const auto now = std::chrono::steady_clock::now();
+    *seconds += std::chrono::duration<double>(now - stage).count();
+    stage = now;
+  };
+  // The grids: the square plus the scan's reach on each side, in whole cells so poses sit on cell corners.
+  const double r = s.r;
+  const int margin = static_cast<int>(std::ceil(std::max(r, points.reach) / r)) + 1;
+  BandGrids grids =
+      bandGrids(map, cfg, r, s.blur_sigma, s.levels, s.x_lo - margin * r, s.y_lo - margin * r, s.side + 2 * margin + 1);
+  if (grids.occupied == 0) return false;
+  const int width = static_cast<int>(grids.values.size()) / grids.side;
+  const LikelihoodPyramid pyramid(std::move(grids.values), width, grids.side, s.levels);
+  lap(grid_seconds);
+  BbsProblem problem;
+  problem.pyramid = &pyramid;
+  problem.width = problem.height = s.side;
+  for (const double yaw : s.yaws) {
+    const Eigen::Rotation2Dd rot(yaw);
+    std::vector<Eigen::Vector2i> cells;
+    cells.reserve(points.xy.size());
+    for (std::size_t i = 0; i < points.xy.size(); ++i) {
+      const Eigen::Vector2d q = rot * points.xy[i] / r + Eigen::Vector2d::Constant(margin);
+      cells.emplace_back(static_cast<int>(std::floor(q.x())) + points.band[i] * grids.stride,
+                         static_cast<int>(std::floor(q.y())));
+    }
+    problem.cells.push_back(std::move(cells));
+  }
+  const BbsOutcome outcome =
+      branchAndBound(problem, min_score, ratio, cfg.adapted_initial_score ? cfg.initial_descents : 0, cfg.threads);
+  *evaluated += outcome.evaluated;
+  leaves->clear();
+  for (const BbsNode& n : outcome.leaves)
+    leaves->push_back(Candidate{s.x_lo + n.x * r, s.y_lo + n.y * r, s.yaws[static_cast<std::size_t>(n.yaw)], n.score});
+  lap(search_seconds);
+  return true;
 }
 
 }  // namespace
@@ -163,6 +240,7 @@ std::string GlobalLocalizationConfig::validate() const {
   if (!(blur_sigma >= 0.0) || !std::isfinite(blur_sigma)) err << "blur_sigma must be >= 0 (got " << blur_sigma << "); ";
   if (!(yaw_step >= 0.0) || !(yaw_step < kTwoPi)) err << "yaw_step must be in [0, 2 pi) (got " << yaw_step << "); ";
   if (levels < 1 || levels > 12) err << "levels must be in 1..12 (got " << levels << "); ";
+  if (max_poses < 1000) err << "max_poses must be in [1000, 2^31 - 1] (got " << max_poses << "); ";
   if (initial_descents < 1) err << "initial_descents must be >= 1 (got " << initial_descents << "); ";
   fraction("min_score", min_score, true);
   fraction("max_runner_up_ratio", max_runner_up_ratio, false);
@@ -278,33 +356,36 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
   if (!scan_ground.heightNear(0.0, 0.0, kGroundRadius, &scan_ground_z))
     return refused(result, "the scan shows no ground near the sensor, so z cannot be set", start);
 
-  // Yaws: the step moves the farthest point by at most one cell.
+  // The search over the whole square at resolution * 2^k, the smallest k whose poses fit max_poses; the yaw step
+  // (which moves the farthest point by at most one cell) and the likelihood spread scale with it, so it is the same
+  // search in cells.
   const double r = cfg.resolution;
   const double reach = std::max(r, points.reach);
   const double step = cfg.yaw_step > 0.0 ? cfg.yaw_step : r / reach;
-  std::vector<double> yaws;
-  if (request.yaw_range >= kTwoPi - 1e-9) {
-    const int n = static_cast<int>(std::ceil(kTwoPi / step));
-    for (int i = 0; i < n; ++i) yaws.push_back(wrapAngle(request.yaw_center + kTwoPi * i / n));
-  } else {
-    const int n = static_cast<int>(std::ceil(request.yaw_range / step)) + 1;
-    for (int i = 0; i < n; ++i)
-      yaws.push_back(wrapAngle(request.yaw_center - request.yaw_range / 2 + request.yaw_range * i / (n - 1)));
-  }
-
-  // The grids: the search square plus the scan's reach on each side, in whole cells so poses sit on cell corners.
-  const int window = static_cast<int>(std::floor(request.size / r)) + 1;
-  const int margin = static_cast<int>(std::ceil(reach / r)) + 1;
   const double x_lo = request.center_x - request.size / 2, y_lo = request.center_y - request.size / 2;
-  // Where the time goes (the result's grid, search and refine seconds).
-  auto stage = std::chrono::steady_clock::now();
-  auto lap = [&stage](double* seconds) {
-    const auto now = std::chrono::steady_clock::now();
-    *seconds = std::chrono::duration<double>(now - stage).count();
-    stage = now;
+  auto squareAt = [&](int k) {
+    SquareSearch s;
+    s.r = std::ldexp(r, k);
+    s.blur_sigma = std::ldexp(cfg.blur_sigma, k);
+    s.levels = cfg.levels;
+    s.x_lo = x_lo;
+    s.y_lo = y_lo;
+    s.side = static_cast<int>(std::floor(request.size / s.r)) + 1;
+    s.yaws = yawList(request.yaw_center, request.yaw_range, std::ldexp(step, k));
+    return s;
   };
-  BandGrids grids = bandGrids(map_->structure, cfg, x_lo - margin * r, y_lo - margin * r, window + 2 * margin + 1);
-  if (grids.occupied == 0) {
+  int k = 0;
+  SquareSearch square = squareAt(0);
+  // Terminates: the poses shrink to 1 position x 1 or 2 yaws, and max_poses >= 1000.
+  while (square.poses() > static_cast<std::size_t>(cfg.max_poses)) square = squareAt(++k);
+  result.search_resolution = square.r;
+  result.search_poses = square.poses();
+
+  const double full = 255.0 * static_cast<double>(points.xy.size());
+  const auto min_score = static_cast<std::int64_t>(std::ceil(cfg.min_score * full));
+  std::vector<Candidate> leaves;
+  if (!runSearch(map_->structure, points, cfg, square, min_score, cfg.max_runner_up_ratio, &leaves,
+                 &result.candidates_evaluated, &result.grid_seconds, &result.search_seconds)) {
     std::ostringstream msg;
     const Eigen::AlignedBox2d& b = map_->bounds;
     msg << "no map structure within the scan's reach of the search square (centre " << request.center_x << ", "
@@ -312,51 +393,79 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
         << b.max().x() << ", y " << b.min().y() << ".." << b.max().y() << ": move the centre onto the map";
     return refused(result, msg.str(), start);
   }
-  const int width = static_cast<int>(grids.values.size()) / grids.side;
-  const LikelihoodPyramid pyramid(std::move(grids.values), width, grids.side, cfg.levels);
-  lap(&result.grid_seconds);
-  BbsProblem problem;
-  problem.pyramid = &pyramid;
-  problem.width = problem.height = window;
-  for (const double yaw : yaws) {
-    const Eigen::Rotation2Dd rot(yaw);
-    std::vector<Eigen::Vector2i> cells;
-    cells.reserve(points.xy.size());
-    for (std::size_t i = 0; i < points.xy.size(); ++i) {
-      const Eigen::Vector2d q = rot * points.xy[i] / r + Eigen::Vector2d::Constant(margin);
-      cells.emplace_back(static_cast<int>(std::floor(q.x())) + points.band[i] * grids.stride,
-                         static_cast<int>(std::floor(q.y())));
-    }
-    problem.cells.push_back(std::move(cells));
-  }
-  const double full = 255.0 * static_cast<double>(points.xy.size());
-  const auto min_score = static_cast<std::int64_t>(std::ceil(cfg.min_score * full));
-  const BbsOutcome outcome = branchAndBound(problem, min_score, cfg.max_runner_up_ratio,
-                                            cfg.adapted_initial_score ? cfg.initial_descents : 0, cfg.threads);
-  result.candidates_evaluated = outcome.evaluated;
-  lap(&result.search_seconds);
-  if (outcome.leaves.empty()) {
+  auto noPose = [&]() {
     std::ostringstream msg;
     msg << "no pose in the search area scores min_score = " << cfg.min_score
         << ": the robot is elsewhere, or the map or the scan shows too little of the same structure";
     return refused(result, msg.str(), start);
-  }
-  result.score = static_cast<double>(outcome.leaves.front().score) / full;
+  };
+  if (leaves.empty()) return noPose();
+  result.score = static_cast<double>(leaves.front().score) / full;
   result.runner_up_score = cfg.max_runner_up_ratio * result.score;  // an upper bound until a runner-up is refined
 
-  // Distinct candidates: the best leaf, then each next leaf far (in position or yaw) from all kept ones.
-  auto x_of = [&](const BbsNode& n) { return x_lo + n.x * r; };
-  auto y_of = [&](const BbsNode& n) { return y_lo + n.y * r; };
-  auto yaw_of = [&](const BbsNode& n) { return yaws[static_cast<std::size_t>(n.yaw)]; };
-  std::vector<BbsNode> distinct;
-  for (const BbsNode& leaf : outcome.leaves) {
-    bool far = true;
-    for (const BbsNode& d : distinct)
-      far = far && (r * std::hypot(leaf.x - d.x, leaf.y - d.y) >= cfg.runner_up_distance ||
-                    std::abs(wrapAngle(yaw_of(leaf) - yaw_of(d))) >= cfg.runner_up_yaw);
-    if (!far) continue;
-    distinct.push_back(leaf);
-    if (distinct.size() > static_cast<std::size_t>(cfg.refine_candidates)) break;
+  // Distinct candidates: the best one, then each next one far (in position or yaw) from all kept ones, at most `keep`.
+  auto selectDistinct = [&](const std::vector<Candidate>& sorted, double apart, double apart_yaw, std::size_t keep) {
+    std::vector<Candidate> out;
+    for (const Candidate& c : sorted) {
+      bool far = true;
+      for (const Candidate& d : out)
+        far = far && (std::hypot(c.x - d.x, c.y - d.y) >= apart || std::abs(wrapAngle(c.yaw - d.yaw)) >= apart_yaw);
+      if (!far) continue;
+      out.push_back(c);
+      if (out.size() >= keep) break;
+    }
+    return out;
+  };
+  const auto refinable = static_cast<std::size_t>(cfg.refine_candidates) + 1;  // one more tells an ambiguous scene
+  std::vector<Candidate> distinct;
+  if (k == 0) {
+    distinct = selectDistinct(leaves, cfg.runner_up_distance, cfg.runner_up_yaw, refinable);
+  } else {
+    // A coarse search is a filter: its broad peaks put many places within max_runner_up_ratio, and a coarse score
+    // only approximates the fine one. So more places (those 2 cells or 2 yaw steps apart) are kept, and each is brought
+    // down to full resolution one level at a time: the best pose within 2 cells and 2 yaw steps of the level above
+    // (9 x 9 positions x 9 yaws), on the map structure near it only. The places are then chosen at full resolution.
+    const std::vector<Candidate> coarse =
+        selectDistinct(leaves, std::max(cfg.runner_up_distance, 2.0 * square.r),
+                       std::max(cfg.runner_up_yaw, 2.0 * std::ldexp(step, k)), kCoarseCandidatesPerRefined * refinable);
+    // [m] what the grids of the levels can hold: the squares drift by < 4 coarse cells, plus the reach.
+    const double halo = 10.0 * square.r + reach;
+    std::vector<Candidate> fine, best;
+    std::vector<StructurePoint> near;
+    for (Candidate c : coarse) {
+      near.clear();
+      for (const StructurePoint& p : map_->structure)
+        if (std::abs(p.xy.x() - c.x) <= halo && std::abs(p.xy.y() - c.y) <= halo) near.push_back(p);
+      bool kept = true;
+      for (int level = k - 1; level >= 0 && kept; --level) {
+        SquareSearch local;
+        local.r = std::ldexp(r, level);
+        local.blur_sigma = std::ldexp(cfg.blur_sigma, level);
+        local.x_lo = c.x - 4.0 * local.r;
+        local.y_lo = c.y - 4.0 * local.r;
+        local.side = 9;
+        local.levels = std::min(cfg.levels, 4);  // 2^4 >= 9: one root per yaw
+        const double local_step = std::ldexp(step, level);
+        local.yaws = yawList(c.yaw, 8.0 * local_step, local_step);
+        result.local_poses += local.poses();
+        kept = runSearch(near, points, cfg, local, 0, 1.0, &best, &result.candidates_evaluated, &result.grid_seconds,
+                         &result.search_seconds) &&
+               !best.empty();
+        if (kept) c = best.front();
+      }
+      if (kept && c.score >= min_score) fine.push_back(c);
+    }
+    std::sort(fine.begin(), fine.end(), [](const Candidate& a, const Candidate& b) {
+      return std::make_tuple(-a.score, a.x, a.y, a.yaw) < std::make_tuple(-b.score, b.x, b.y, b.yaw);
+    });
+    if (fine.empty()) return noPose();
+    const double bound = cfg.max_runner_up_ratio * static_cast<double>(fine.front().score);
+    fine.erase(std::remove_if(fine.begin(), fine.end(),
+                              [bound](const Candidate& c) { return static_cast<double>(c.score) < bound; }),
+               fine.end());
+    distinct = selectDistinct(fine, cfg.runner_up_distance, cfg.runner_up_yaw, refinable);
+    result.score = static_cast<double>(distinct.front().score) / full;
+    result.runner_up_score = cfg.max_runner_up_ratio * result.score;
   }
 
   // Refine each distinct candidate with NDT: z from the map's ground under it and the scan's under the sensor, roll
@@ -364,6 +473,7 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
   // by their NDT fit, the scan's 3D agreement with the map, which the 2D search score only approximates.
   const NdtAligner aligner(cfg.ndt);
   const PointCloud source = voxelDownsample(finite, r);
+  auto stage = std::chrono::steady_clock::now();
   struct Answer {
     std::size_t candidate;
     Eigen::Isometry3d guess, pose;
@@ -372,12 +482,12 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
   std::vector<Answer> answers;
   const std::size_t refined = std::min(distinct.size(), static_cast<std::size_t>(cfg.refine_candidates));
   for (std::size_t i = 0; i < refined; ++i) {
-    const BbsNode& n = distinct[i];
+    const Candidate& n = distinct[i];
     double ground_z = 0.0;
-    if (!map_->ground.heightNear(x_of(n), y_of(n), kGroundRadius, &ground_z)) continue;
+    if (!map_->ground.heightNear(n.x, n.y, kGroundRadius, &ground_z)) continue;
     Answer a{i, Eigen::Isometry3d::Identity(), Eigen::Isometry3d::Identity(), NdtResult()};
-    a.guess.translation() = Eigen::Vector3d(x_of(n), y_of(n), ground_z - scan_ground_z);
-    a.guess.linear() = Eigen::AngleAxisd(yaw_of(n), Eigen::Vector3d::UnitZ()).toRotationMatrix() * level;
+    a.guess.translation() = Eigen::Vector3d(n.x, n.y, ground_z - scan_ground_z);
+    a.guess.linear() = Eigen::AngleAxisd(n.yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix() * level;
     a.ndt = aligner.align(*map_->ndt_target, source, a.guess.cast<float>().matrix());
     if (a.ndt.status != NdtResultStatus::OK && a.ndt.status != NdtResultStatus::MAX_ITERATIONS) continue;
     a.pose.matrix() = a.ndt.transform.cast<double>();
@@ -389,7 +499,7 @@ GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const
     }
     if (!same) answers.push_back(a);
   }
-  lap(&result.refine_seconds);
+  result.refine_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - stage).count();
   if (answers.empty())
     return refused(result, "the NDT refinement failed for every candidate: the map around them has too few voxels",
                    start);

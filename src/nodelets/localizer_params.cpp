@@ -149,6 +149,7 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
   load("global_localization/blur_sigma", gc.blur_sigma);
   load("global_localization/yaw_step", gc.yaw_step);
   load("global_localization/levels", gc.levels);
+  load("global_localization/max_poses", gc.max_poses);
   load("global_localization/adapted_initial_score", gc.adapted_initial_score);
   load("global_localization/initial_descents", gc.initial_descents);
   load("global_localization/min_score", gc.min_score);

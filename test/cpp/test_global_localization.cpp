@@ -2,6 +2,8 @@
 // synthetic worlds with known poses.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <limits>
 #include <random>
 #include <string>
 
@@ -310,4 +312,104 @@ TEST_F(GlobalLocalizerTest, RefusesAnAmbiguousScene) {
   EXPECT_NE(r.reason.find("ambiguous"), std::string::npos) << r.reason;
   EXPECT_GE(r.runner_up_score, 0.9 * r.score);
   EXPECT_LT(r.confidence, 0.1);
+}
+
+// ---------------------------------------------------------------- the work budget (max_poses)
+
+namespace {
+
+/// Yaws of a search over the full circle at `step` [rad].
+std::size_t fullCircleYaws(double step) { return static_cast<std::size_t>(std::ceil(2.0 * kPi / step)); }
+
+/// Positions x yaws of a search over a `size` [m] square at resolution * 2^k and the full circle at step * 2^k.
+std::size_t posesAt(double size, double resolution, double step, int k) {
+  const auto side = static_cast<std::size_t>(std::floor(size / std::ldexp(resolution, k))) + 1;
+  return side * side * fullCircleYaws(std::ldexp(step, k));
+}
+
+/// Nodes a branch and bound can score on `side` x `side` positions x `yaws` with `levels` pyramid levels: every node
+/// of every level (each is scored at most once as a root or a child), plus the greedy descents' 4 children per level.
+std::size_t treeNodes(std::size_t side, std::size_t yaws, int levels, int descents) {
+  std::size_t nodes = 0;
+  for (int h = 0; h <= levels; ++h) {
+    const std::size_t cells = (side + (std::size_t{1} << h) - 1) >> h;
+    nodes += yaws * cells * cells;
+  }
+  return nodes + static_cast<std::size_t>(4 * levels * descents);
+}
+
+}  // namespace
+
+// The default budget holds today's common search: a 40 m square with the full circle of yaw at 0.5 m, for a scan
+// reaching max_range (the automatic yaw step resolution / 40 m): 81^2 x 503 poses.
+TEST(GlobalLocalizationConfig, DefaultBudgetHoldsA40mSquareWithTheFullCircleOfYaw) {
+  const gpl::GlobalLocalizationConfig c;
+  const std::size_t common = posesAt(40.0, c.resolution, c.resolution / c.max_range, 0);
+  EXPECT_EQ(common, 81u * 81u * 503u);
+  EXPECT_LE(common, static_cast<std::size_t>(c.max_poses));
+  EXPECT_GT(posesAt(50.0, c.resolution, c.resolution / c.max_range, 0), static_cast<std::size_t>(c.max_poses));
+  gpl::GlobalLocalizationConfig bad;
+  bad.max_poses = 999;
+  EXPECT_NE(bad.validate().find("max_poses"), std::string::npos) << bad.validate();
+  bad.max_poses = 1000;
+  EXPECT_EQ(bad.validate(), "");
+}
+
+TEST_F(GlobalLocalizerTest, WorkPerSearchStaysWithinTheBudgetAsTheSquareGrows) {
+  // The yaw step set to what the automatic one is for a scan reaching 40 m, so that every count has a closed form.
+  gpl::GlobalLocalizationConfig unbounded = config();
+  unbounded.yaw_step = unbounded.resolution / 40.0;
+  unbounded.max_poses = std::numeric_limits<int>::max();
+  gpl::GlobalLocalizer without(unbounded);
+  without.setMap(*world_);
+  // The default budget, and one that takes the 200 m and 400 m squares down to 8 m cells (k = 4).
+  std::vector<gpl::GlobalLocalizer> with;
+  for (const int budget : {gpl::GlobalLocalizationConfig().max_poses, 100000}) {
+    gpl::GlobalLocalizationConfig c = unbounded;
+    c.max_poses = budget;
+    with.emplace_back(c);
+    with.back().setMap(*world_);
+  }
+  const Eigen::Isometry3d truth = poseXYYaw(4.3, -3.1, 2.2, 1.8);
+  const gpl::PointCloud scan = scanFrom(*world_, truth, 40.0f, 0.02f, 6);
+  const int levels = unbounded.levels, descents = unbounded.initial_descents;
+  const std::size_t places = 4 * static_cast<std::size_t>(unbounded.refine_candidates + 1);
+  std::size_t previous_poses = 0, previous_evaluated = 0, most_evaluated_within_budget = 0;
+  for (const double size : {20.0, 50.0, 100.0, 200.0, 400.0}) {
+    const gpl::GlobalSearchRequest request = around(3.0, -1.0, size);
+    for (const gpl::GlobalLocalizer& localizer : with) {
+      const gpl::GlobalLocalizationConfig& c = localizer.config();
+      SCOPED_TRACE("square " + std::to_string(size) + " m, max_poses " + std::to_string(c.max_poses));
+      const gpl::GlobalLocalizationResult r = localizer.localize(scan, request);
+      // The closed form of the search's resolution: resolution * 2^k with the smallest k whose poses fit the budget.
+      int k = 0;
+      while (posesAt(size, c.resolution, c.yaw_step, k) > static_cast<std::size_t>(c.max_poses)) ++k;
+      EXPECT_DOUBLE_EQ(r.search_resolution, std::ldexp(c.resolution, k));
+      EXPECT_EQ(r.search_poses, posesAt(size, c.resolution, c.yaw_step, k));
+      EXPECT_LE(r.search_poses, static_cast<std::size_t>(c.max_poses));
+      // Bringing the coarse places down to full resolution: 9 x 9 positions x 9 yaws per place and level.
+      EXPECT_LE(r.local_poses, places * 729 * static_cast<std::size_t>(k));
+      const auto side = static_cast<std::size_t>(std::floor(size / r.search_resolution)) + 1;
+      EXPECT_LE(r.candidates_evaluated, treeNodes(side, fullCircleYaws(std::ldexp(c.yaw_step, k)), levels, descents) +
+                                            places * static_cast<std::size_t>(k) * treeNodes(9, 9, levels, descents));
+      most_evaluated_within_budget = std::max(most_evaluated_within_budget, r.candidates_evaluated);
+      // The true pose (the yard is unambiguous) at full precision, whatever the search's resolution.
+      ASSERT_TRUE(r.found) << r.reason;
+      EXPECT_LT(translationError(r.map_T_base, truth), 0.05);
+      EXPECT_LT(rotationError(r.map_T_base, truth), 0.5 * kPi / 180);
+    }
+    // Without the budget the work grows with the area.
+    SCOPED_TRACE("square " + std::to_string(size) + " m without a budget");
+    const gpl::GlobalLocalizationResult u = without.localize(scan, request);
+    ASSERT_TRUE(u.found) << u.reason;
+    EXPECT_DOUBLE_EQ(u.search_resolution, unbounded.resolution);
+    EXPECT_EQ(u.search_poses, posesAt(size, unbounded.resolution, unbounded.yaw_step, 0));
+    EXPECT_EQ(u.local_poses, 0u);
+    EXPECT_GT(u.search_poses, previous_poses);
+    EXPECT_GT(u.candidates_evaluated, previous_evaluated);
+    previous_poses = u.search_poses;
+    previous_evaluated = u.candidates_evaluated;
+  }
+  EXPECT_GT(previous_poses, 50u * static_cast<std::size_t>(with.front().config().max_poses));
+  EXPECT_GT(previous_evaluated, 4 * most_evaluated_within_budget);
 }
