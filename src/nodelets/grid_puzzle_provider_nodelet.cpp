@@ -72,7 +72,11 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
         "tile_delta", 50, [this](const ros::SingleSubscriberPublisher& peer) { sendReset(peer); },
         ros::SubscriberStatusCallback());
     status_pub_ = pnh.advertise<ProviderStatus>("status", 10, true);
-    if (config_.publish_map_cloud)
+    // map_cloud merges the window's tile files, which a map given by URL does not have locally.
+    if (config_.publish_map_cloud && isMapStoreUrl(config_.tiles_dir))
+      NODELET_ERROR("%s: publish_map_cloud needs a local tile directory, not the URL %s; map_cloud is not published",
+                    getName().c_str(), config_.tiles_dir.c_str());
+    else if (config_.publish_map_cloud)
       map_cloud_ = std::make_unique<ProviderMapCloud>(nh, config_.map_frame, config_.map_cloud_period);
     resend_srv_ = pnh.advertiseService("resend", &GridPuzzleProviderNodelet::onResend, this);
     if (config_.pose_source == "odom") {
