@@ -224,8 +224,9 @@ TEST(MapUpdateWorker, FreedMapMemoryGoesBackToTheSystemOnceTheWorkerIsIdle) {
   ASSERT_NE(small, nullptr);
   worker.retire(std::move(big));
   worker.waitIdle();
-  // Handed back within the worker's trim period (2 s) of its last change, without a further change.
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(6);
+  // Handed back after the worker's trim period (2 s) since its last change, without a further change. The deadline
+  // leaves room for a busy machine: the worker runs niced (kWorkerNiceIncrement) and waits for a core there.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
   std::size_t now = residentBytes();
   while (with_map - std::min(now, with_map) < map_bytes / 2 && std::chrono::steady_clock::now() < deadline) {
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
