@@ -79,13 +79,9 @@ struct LocalizerConfig {
   /// cores": a 10 Hz scan takes ~10 ms on one core, and a team of two that shares its cores with the
   /// driver and the map worker waits for its slowest thread (measured 4x the median latency on a loaded
   /// 2-core machine, see README "Benchmark").
-  /// Its step_size is 0.2 (PCL's 0.1 is NdtConfig's): the scans whose prediction is 1-2 m off (keyframes at irregular
-  /// times, a turn), the slowest of a drive, take fewer Newton iterations (kitti00_far: p95 13 -> 10 and 11 -> 8);
-  /// on the simulated courtyard, urban and hand-held drives and on kitti00_far the errors are the same or lower.
   NdtConfig ndt = [] {
     NdtConfig c;
     c.threads = 1;
-    c.step_size = 0.2;
     return c;
   }();
   CovarianceConfig covariance;
