@@ -33,6 +33,7 @@
 #include "grid_puzzle_localization/TileDelta.h"
 #include "grid_puzzle_localization/map_store/map_store.hpp"
 #include "grid_puzzle_localization/provider/window_server.hpp"
+#include "hint_msg.hpp"
 #include "map_store_params.hpp"
 #include "provider_map_cloud.hpp"
 #include "provider_msgs.hpp"
@@ -148,29 +149,20 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
 
   // A coarse position (GNSS) before any pose: the window holds the localizer's search around it.
   void onHint(const geometry_msgs::PoseWithCovarianceStamped::ConstPtr& msg) {
-    if (!msg->header.frame_id.empty() && msg->header.frame_id != config_.map_frame) {
-      NODELET_ERROR("initialpose_hint is in frame '%s' but map_frame is '%s'; ignored: send the hint in the map frame",
-                    msg->header.frame_id.c_str(), config_.map_frame.c_str());
+    const HintRegion hint = hintRegionOf(*msg, config_.map_frame);
+    if (!hint.region) {
+      NODELET_ERROR("%s", hint.error.c_str());
       return;
     }
-    const geometry_msgs::Point& p = msg->pose.pose.position;
-    const std::optional<LostSearchRegion> region =
-        hintRegion(p.x, p.y, msg->pose.covariance[0], msg->pose.covariance[7], msg->header.stamp.toSec());
-    if (!region) {
-      NODELET_ERROR(
-          "initialpose_hint ignored: its position (%g, %g) is not finite; send x and y in metres in the map "
-          "frame",
-          p.x, p.y);
-      return;
-    }
+    const LostSearchRegion& region = *hint.region;
     {
       std::lock_guard<std::mutex> lock(server_mutex_);
-      if (server_ && !server_->touchesMap(*region)) {
-        const TileBox m = server_->tiles().directory().bounds;
+      if (server_ && !server_->touchesMap(region)) {
+        const MapExtent m = server_->mapExtent();
         NODELET_ERROR(
             "initialpose_hint (%.1f, %.1f) m (search radius %.1f m) lies outside the map, which spans x "
             "%.0f..%.0f m, y %.0f..%.0f m; ignored: check the hint's frame and origin",
-            p.x, p.y, region->radius, m.i_min * s_, (m.i_max + 1) * s_, m.j_min * s_, (m.j_max + 1) * s_);
+            region.x, region.y, region.radius, m.x_min, m.x_max, m.y_min, m.y_max);
         return;
       }
     }
@@ -405,13 +397,13 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
   void reportOffMap(const Served& served, std::size_t loaded) {
     const bool off_map = loaded == 0;
     if (off_map) {
-      const TileBox w = served.window.bounds(), m = server_->tiles().directory().bounds;
+      const TileBox w = served.window.bounds();
+      const MapExtent m = server_->mapExtent();
       NODELET_WARN_THROTTLE(kWarnPeriod,
                             "pose (%.1f, %.1f) m is off the map: no tile in window i %ld..%ld, j %ld..%ld (the map "
                             "spans x %.0f..%.0f m, y %.0f..%.0f m); publishing an empty window until the pose returns",
                             served.pose.x, served.pose.y, static_cast<long>(w.i_min), static_cast<long>(w.i_max),
-                            static_cast<long>(w.j_min), static_cast<long>(w.j_max), m.i_min * s_, (m.i_max + 1) * s_,
-                            m.j_min * s_, (m.j_max + 1) * s_);
+                            static_cast<long>(w.j_min), static_cast<long>(w.j_max), m.x_min, m.x_max, m.y_min, m.y_max);
     } else if (off_map_) {
       NODELET_INFO("pose (%.1f, %.1f) m is back on the map: %zu tiles in the window", served.pose.x, served.pose.y,
                    loaded);

@@ -27,6 +27,7 @@
 #include "grid_puzzle_localization/localizer.hpp"
 #include "grid_puzzle_localization/provider/window.hpp"
 #include "grid_puzzle_localization/rpy.hpp"
+#include "hint_msg.hpp"
 #include "imu_msg.hpp"
 #include "latest_scan_slot.hpp"
 #include "localizer_params.hpp"
@@ -275,34 +276,30 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   }
 
   void onHint(const geometry_msgs::PoseWithCovarianceStamped::ConstPtr& msg) {
-    if (!checkMapFrame(msg->header.frame_id, "initialpose_hint")) return;
-    const geometry_msgs::Point& p = msg->pose.pose.position;
-    const std::optional<LostSearchRegion> region =
-        hintRegion(p.x, p.y, msg->pose.covariance[0], msg->pose.covariance[7], msg->header.stamp.toSec());
-    if (!region) {
-      NODELET_ERROR(
-          "initialpose_hint ignored: its position (%g, %g) is not finite; send x and y in metres in the map "
-          "frame",
-          p.x, p.y);
+    const HintRegion hint = hintRegionOf(*msg, params_.map_frame);
+    if (!hint.region) {
+      NODELET_ERROR("%s", hint.error.c_str());
       return;
     }
+    const LostSearchRegion& region = *hint.region;
+    const double x = region.x, y = region.y;
     // With tiles the loaded map is only the provider's window: the provider checks a hint against the whole map.
     const std::optional<Eigen::AlignedBox3d> box =
         params_.map_source == "tiles" ? std::nullopt : localizer_->mapBounds();
-    if (box && (p.x + region->radius < box->min().x() || p.x - region->radius > box->max().x() ||
-                p.y + region->radius < box->min().y() || p.y - region->radius > box->max().y())) {
+    if (box && (x + region.radius < box->min().x() || x - region.radius > box->max().x() ||
+                y + region.radius < box->min().y() || y - region.radius > box->max().y())) {
       NODELET_ERROR(
           "initialpose_hint (%.1f, %.1f) m (search radius %.1f m) lies outside the map, which spans x "
           "%.0f..%.0f m, y %.0f..%.0f m; ignored: check the hint's frame and origin",
-          p.x, p.y, region->radius, box->min().x(), box->max().x(), box->min().y(), box->max().y());
+          x, y, region.radius, box->min().x(), box->max().x(), box->min().y(), box->max().y());
       return;
     }
-    hint_ = Hint{Eigen::Vector2d(p.x, p.y), 2.0 * region->radius};
+    hint_ = Hint{Eigen::Vector2d(x, y), 2.0 * region.radius};
     if (!localizer_->lastAcceptedPose()) {
       hint_due_ = true;  // searched at the next scan that waits for a pose
       last_hint_search_.reset();
     }
-    NODELET_INFO("initialpose_hint (%.1f, %.1f) m, search radius %.1f m%s", p.x, p.y, region->radius,
+    NODELET_INFO("initialpose_hint (%.1f, %.1f) m, search radius %.1f m%s", x, y, region.radius,
                  hint_due_ ? ": global search at the next scan" : "");
   }
 

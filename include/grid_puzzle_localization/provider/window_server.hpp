@@ -20,6 +20,11 @@ struct Served {
   PoseSample pose;       ///< the pose, or the search region's centre, the window was computed for
 };
 
+/// [m] the box of a directory's tiles (map frame).
+struct MapExtent {
+  double x_min = 0.0, x_max = 0.0, y_min = 0.0, y_max = 0.0;
+};
+
 class WindowServer {
  public:
   WindowServer(const WindowConfig& window, double max_half_side, TileDirectory directory);
@@ -33,6 +38,8 @@ class WindowServer {
   /// Every tile of the directory, for the global search of a start without a pose or a hint, or nullopt when it is
   /// served already (or the directory is empty). Like a search's window it stays until the localizer tracks.
   std::optional<Served> onWholeMap();
+  /// The box of the directory's tiles.
+  MapExtent mapExtent() const;
   /// True when the square of half side `region.radius` around its centre meets the directory's tiles' box.
   bool touchesMap(const LostSearchRegion& region) const;
   /// [m^2] of the directory's bounding box of tiles.

@@ -32,11 +32,17 @@ std::optional<Served> WindowServer::onWholeMap() {
   return serve(centre, window);
 }
 
-bool WindowServer::touchesMap(const LostSearchRegion& region) const {
+MapExtent WindowServer::mapExtent() const {
   const TileBox b = tiles_.directory().bounds;
-  const double s = tracker_.s(), r = region.radius;
-  return static_cast<double>(b.i_min) * s <= region.x + r && region.x - r <= static_cast<double>(b.i_max + 1) * s &&
-         static_cast<double>(b.j_min) * s <= region.y + r && region.y - r <= static_cast<double>(b.j_max + 1) * s;
+  const double s = tracker_.s();
+  return {static_cast<double>(b.i_min) * s, static_cast<double>(b.i_max + 1) * s, static_cast<double>(b.j_min) * s,
+          static_cast<double>(b.j_max + 1) * s};
+}
+
+bool WindowServer::touchesMap(const LostSearchRegion& region) const {
+  const MapExtent m = mapExtent();
+  const double r = region.radius;
+  return m.x_min <= region.x + r && region.x - r <= m.x_max && m.y_min <= region.y + r && region.y - r <= m.y_max;
 }
 
 double WindowServer::mapArea() const {

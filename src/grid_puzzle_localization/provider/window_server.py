@@ -57,16 +57,17 @@ class WindowServer:
         self.lost.active = True
         return self._serve(PoseSample(x, y, t), window)
 
+    def map_extent(self) -> tuple[float, float, float, float]:
+        """[m] x_min, x_max, y_min, y_max of the box of the directory's tiles."""
+        i0, i1, j0, j1 = self.tiles.directory.bounds
+        s = self.tracker.s
+        return i0 * s, (i1 + 1) * s, j0 * s, (j1 + 1) * s
+
     def touches_map(self, region: SearchRegion) -> bool:
         """True when the square of half side ``region.radius`` around its centre meets the directory's tiles' box."""
-        i0, i1, j0, j1 = self.tiles.directory.bounds
-        s, r = self.tracker.s, region.radius
-        return (
-            i0 * s <= region.x + r
-            and region.x - r <= (i1 + 1) * s
-            and j0 * s <= region.y + r
-            and region.y - r <= (j1 + 1) * s
-        )
+        x0, x1, y0, y1 = self.map_extent()
+        r = region.radius
+        return x0 <= region.x + r and region.x - r <= x1 and y0 <= region.y + r and region.y - r <= y1
 
     def map_area(self) -> float:
         """[m^2] of the directory's bounding box of tiles."""

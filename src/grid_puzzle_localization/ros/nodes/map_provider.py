@@ -161,17 +161,13 @@ class MapProviderNode:
             rospy.logerr("initialpose_hint ignored: %s; send x and y in metres in the map frame", err)
             return
         if not self.server.touches_map(region):
-            i0, i1, j0, j1 = self.server.tiles.directory.bounds
             rospy.logerr(
                 "initialpose_hint (%.1f, %.1f) m (search radius %.1f m) lies outside the map, which spans"
                 " x %.0f..%.0f m, y %.0f..%.0f m; ignored: check the hint's frame and origin",
                 p.x,
                 p.y,
                 region.radius,
-                i0 * self.s,
-                (i1 + 1) * self.s,
-                j0 * self.s,
-                (j1 + 1) * self.s,
+                *self.server.map_extent(),
             )
             return
         with self._pose_ready:
@@ -340,7 +336,6 @@ class MapProviderNode:
     def _report(self, pose: PoseSample, window: Window, loaded: int) -> None:
         off_map = loaded == 0
         if off_map:
-            i0, i1, j0, j1 = self.server.tiles.directory.bounds
             rospy.logwarn_throttle(
                 WARN_PERIOD,
                 "pose (%.1f, %.1f) m is off the map: no tile in window i %d..%d, j %d..%d (the map spans"
@@ -348,10 +343,7 @@ class MapProviderNode:
                 pose.x,
                 pose.y,
                 *window.bounds,
-                i0 * self.s,
-                (i1 + 1) * self.s,
-                j0 * self.s,
-                (j1 + 1) * self.s,
+                *self.server.map_extent(),
             )
         elif self._off_map:
             rospy.loginfo("pose (%.1f, %.1f) m is back on the map: %d tiles in the window", pose.x, pose.y, loaded)
