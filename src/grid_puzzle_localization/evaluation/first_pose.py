@@ -7,6 +7,7 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation.association import associate
@@ -16,15 +17,14 @@ from grid_puzzle_localization.evaluation.trajectory import Trajectory
 SAME_STAMP_S = 1e-4  # a status and a pose of one scan carry its header stamp (written to the nanosecond)
 
 
-def yaw_rad(quat: np.ndarray) -> np.ndarray:
-    """Yaw [rad] of (n, 4) unit quaternions x y z w: the z angle of the fixed-axis roll, pitch, yaw (REP 103)."""
-    x, y, z, w = np.asarray(quat, dtype=np.float64).reshape(-1, 4).T
-    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+def yaw_of(quat: np.ndarray) -> np.ndarray:
+    """Yaw [rad] of (n, 4) quaternions x y z w: fixed-axis roll, pitch, yaw (REP 103), as sim/trajectory.py reads it."""
+    return Rotation.from_quat(np.asarray(quat, dtype=np.float64).reshape(-1, 4)).as_euler("ZYX")[:, 0]
 
 
 def yaw_difference_deg(q_ref: np.ndarray, q_est: np.ndarray) -> np.ndarray:
     """|yaw(est) - yaw(ref)| [deg], wrapped to [0, 180]."""
-    d = yaw_rad(q_est) - yaw_rad(q_ref)
+    d = yaw_of(q_est) - yaw_of(q_ref)
     return np.degrees(np.abs(np.arctan2(np.sin(d), np.cos(d))))
 
 
