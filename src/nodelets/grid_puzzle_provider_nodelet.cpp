@@ -80,6 +80,16 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
     else if (config_.publish_map_cloud)
       map_cloud_ = std::make_unique<ProviderMapCloud>(nh, config_.map_frame, config_.map_cloud_period);
     resend_srv_ = pnh.advertiseService("resend", &GridPuzzleProviderNodelet::onResend, this);
+    // A map given by URL is opened now: with its server unreachable and no index of it in the cache there is
+    // nothing to serve, and the nodelet stops here naming the URL (a directory is waited for: a disk mounted late).
+    if (isMapStoreUrl(config_.tiles_dir)) {
+      try {
+        openServer();
+      } catch (const std::exception& e) {
+        NODELET_FATAL("%s: %s", getName().c_str(), e.what());
+        throw;
+      }
+    }
     if (config_.pose_source == "odom") {
       pose_sub_ = nh.subscribe("odom", 1, &GridPuzzleProviderNodelet::onOdom, this);
       // The localizer publishes odom only once it has a map, which comes from here: the start pose seeds the
@@ -234,22 +244,7 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
   bool openDirectory() {
     if (server_) return true;
     try {
-      TileDirectory directory = isMapStoreUrl(config_.tiles_dir)
-                                    ? openStore()
-                                    : openTileDirectory(config_.tiles_dir, config_.tiles_grid_size);
-      const std::size_t tiles = directory.tiles.size();
-      if (!directory.unparsable.empty())
-        NODELET_WARN("%s: %zu .pcd files are not tiles of side %g m and are ignored, e.g. %s",
-                     config_.tiles_dir.c_str(), directory.unparsable.size(), directory.grid_size,
-                     directory.unparsable.front().c_str());
-      const std::string source = directory.source;
-      std::lock_guard<std::mutex> lock(server_mutex_);
-      server_.emplace(config_.window, config_.lost_max_half_side, std::move(directory));
-      s_ = server_->tiles().directory().grid_size;
-      NODELET_INFO("%s: %zu tiles of %g m in %s (%s), n=%d k=%d, update distance %g m, listening on %s",
-                   getName().c_str(), tiles, s_, config_.tiles_dir.c_str(), source.c_str(),
-                   server_->tracker().config().n, server_->tracker().config().k, server_->tracker().updateDistance(),
-                   config_.pose_source.c_str());
+      openServer();
       return true;
     } catch (const std::exception& e) {
       NODELET_ERROR_THROTTLE(kWarnPeriod, "%s: %s; serving no tiles until it can be opened (retrying)",
@@ -257,6 +252,23 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
       std::this_thread::sleep_for(std::chrono::milliseconds(500));
       return false;
     }
+  }
+
+  // The window server on the tile directory or map store; throws naming the directory or URL and what failed.
+  void openServer() {
+    TileDirectory directory =
+        isMapStoreUrl(config_.tiles_dir) ? openStore() : openTileDirectory(config_.tiles_dir, config_.tiles_grid_size);
+    const std::size_t tiles = directory.tiles.size();
+    if (!directory.unparsable.empty())
+      NODELET_WARN("%s: %zu .pcd files are not tiles of side %g m and are ignored, e.g. %s", config_.tiles_dir.c_str(),
+                   directory.unparsable.size(), directory.grid_size, directory.unparsable.front().c_str());
+    const std::string source = directory.source;
+    std::lock_guard<std::mutex> lock(server_mutex_);
+    server_.emplace(config_.window, config_.lost_max_half_side, std::move(directory));
+    s_ = server_->tiles().directory().grid_size;
+    NODELET_INFO("%s: %zu tiles of %g m in %s (%s), n=%d k=%d, update distance %g m, listening on %s",
+                 getName().c_str(), tiles, s_, config_.tiles_dir.c_str(), source.c_str(), server_->tracker().config().n,
+                 server_->tracker().config().k, server_->tracker().updateDistance(), config_.pose_source.c_str());
   }
 
   // The tile directory given by URL, through its index (fetched over the network, or the cache's when the server is
@@ -303,7 +315,10 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
                             store_config_.poll_period);
     else if (!store_reachable_)
       NODELET_INFO("map store %s reachable (index revision %s)", status.url.c_str(), status.revision.c_str());
-    store_reachable_ = status.reachable;
+    if (status.reachable != store_reachable_) {
+      store_reachable_ = status.reachable;
+      publishStatus();
+    }
   }
 
   // With no pose and no hint start/search_timeout after start-up: the whole map, for the localizer's global search.
@@ -391,7 +406,19 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
     reportOffMap(served, loaded);
     const double update_ms =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    status_pub_.publish(providerStatusMsg(*msg, served.window, loaded, update_ms));
+    last_status_ = providerStatusMsg(*msg, served.window, loaded, update_ms);
+    publishStatus();
+  }
+
+  // ~status with the map store's state (a change of it alone publishes the last window's status again).
+  void publishStatus() {
+    if (!last_status_) return;
+    if (store_) {
+      const MapStoreStatus status = store_->status();
+      last_status_->store_reachable = status.reachable;
+      last_status_->store_error = status.last_error;
+    }
+    status_pub_.publish(*last_status_);
   }
 
   void reportOffMap(const Served& served, std::size_t loaded) {
@@ -460,7 +487,8 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
   std::optional<WindowServer> server_;
   double s_ = 0.0;  // tile side [m], set with server_
   std::uint32_t revision_ = 0;
-  bool off_map_ = false;  // worker only
+  bool off_map_ = false;                       // worker only
+  std::optional<ProviderStatus> last_status_;  // worker only: the last ~status published
 
   std::mutex input_mutex_;  // what the callbacks hand to the worker
   std::condition_variable input_ready_;

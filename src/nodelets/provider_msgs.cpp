@@ -73,6 +73,7 @@ ProviderStatus providerStatusMsg(const TileDelta& delta, const Window& window, s
   msg.tiles_removed = static_cast<std::uint32_t>(delta.removed_ids.size());
   msg.tiles_prefetch = static_cast<std::uint32_t>(delta.prefetch_ids.size());
   msg.update_ms = update_ms;
+  msg.store_reachable = true;  // a directory; a map store's provider sets its own state
   return msg;
 }
 

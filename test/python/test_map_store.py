@@ -7,13 +7,17 @@ import hashlib
 import json
 import os
 import random
+import re
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 from fixtures import nginx_server
 
 from grid_puzzle_localization.errors import UserError
+from grid_puzzle_localization.experiment.maps import check_store_tiles
+from grid_puzzle_localization.provider.tile_references import TileReferences, open_store_directory
 from grid_puzzle_localization.tiles.grid import tile_filename
 from grid_puzzle_localization.tiles.map_store import MapStore, MapStoreConfig, unsafe_tile_name
 
@@ -179,3 +183,36 @@ def test_an_index_without_checksums_is_checked_by_size(served):
     (m.dir / f"{ids[1]}.pcd").write_bytes(m.tiles[ids[1]][:10])
     got = store.fetch(ids[:2])
     assert got[0].path.read_bytes() == m.tiles[ids[0]] and "truncated" in got[1].error
+
+
+def test_the_rospy_providers_tile_references_follow_the_stores_revision(served):
+    """A map given by URL in the rospy provider: the tiles of the store's index, named by the URL in tile_delta; a
+    new revision on the server is taken up once a poll has fetched it, and not before."""
+    m, server, config = served
+    store = MapStore(server.url("/map"), config)
+    refs = TileReferences(open_store_directory(store), store)
+    assert refs.location == server.url("/map") and refs.revision == store.revision
+    assert refs.directory.existing_in(Box(-100, 100, -100, 100)) == [(i, 0) for i in range(8)]
+    m.tiles[tile_filename(8, 0, 2.0)[:-4]] = b"new tile"
+    m.write()
+    assert not refs.refresh()  # not polled yet: the revision in use stays
+    assert store.poll_index()
+    assert refs.refresh() and refs.revision == store.revision
+    assert refs.directory.existing_in(Box(-100, 100, -100, 100)) == [(i, 0) for i in range(9)]
+
+
+def test_gpm_experiment_takes_a_store_url_of_its_grid_size(served, tmp_path, monkeypatch):
+    _, server, _ = served
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))  # the default cache directory of the store
+    url = server.url("/map")
+    assert check_store_tiles(url, 2.0) == url
+    with pytest.raises(UserError, match=re.escape(f"{url} serves tiles of 2 m, not 4 m")):
+        check_store_tiles(url, 4.0)
+
+
+@dataclass(frozen=True)
+class Box:
+    i_min: int
+    i_max: int
+    j_min: int
+    j_max: int

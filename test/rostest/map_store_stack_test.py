@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
 """The grid puzzle stack on a tiled map served over HTTP (see map_store_stack.test). nginx serves the output of
-`gpm tile`; the stack (localization.launch, provider nodelet) gets tiles:=http://127.0.0.1:PORT/map. nginx is
-stopped in the middle of the drive and started again: tiles entering the window meanwhile cannot be fetched (the
-localizer names each by its URL) and are fetched with a later delta, the localizer tracks within 5 cm throughout,
-the provider says the store is unreachable naming the URL and then that it is back, and it serves the index
-revision of the served index.json."""
+`gpm tile`; the stack (localization.launch, the provider nodelet or the rospy provider: ~provider) gets
+tiles:=http://127.0.0.1:PORT/map. nginx is stopped in the middle of the drive and started again: tiles entering the
+window meanwhile cannot be fetched (the localizer names each by its URL) and are fetched with a later delta, the
+localizer tracks within 5 cm throughout, the provider says the store is unreachable naming the URL, in its log and
+its ~status, and then that it is back, and it serves the index revision of the served index.json."""
 
 from __future__ import annotations
 
@@ -43,6 +43,7 @@ class MapStoreStackTest(replay.DriveReplayTest):
         if nginx_server.binary() is None:
             raise unittest.SkipTest("nginx is not installed (apt-get install nginx-light)")
         bag = cls.write_drive("map_store_stack_test", ss.Drive(duration=6.0, x0=-8.0))
+        provider = rospy.get_param("~provider")  # nodelet | rospy
         tmp = Path(cls.tmp.name)
         points = ss.sample_map(cls.scene).astype(np.float32)
         records = np.zeros(len(points), dtype=XYZ_DTYPE)
@@ -65,14 +66,20 @@ class MapStoreStackTest(replay.DriveReplayTest):
         env = dict(os.environ, XDG_CACHE_HOME=str(tmp / "cache"))  # the stores' disk cache
         cls.stack_log = open(tmp / "stack.log", "wb")  # noqa: SIM115 (closed in tearDownClass)
         cls.stack = subprocess.Popen(
-            ["roslaunch", "grid_puzzle_localization", "map_store_stack.launch", f"tiles:={cls.url}"],
+            [
+                "roslaunch",
+                "grid_puzzle_localization",
+                "map_store_stack.launch",
+                f"tiles:={cls.url}",
+                f"provider:={provider}",
+            ],
             env=env,
             stdout=cls.stack_log,
             stderr=subprocess.STDOUT,
             start_new_session=True,
         )
         pose_pub = replay.publish_initial_pose("/initialpose", cls.drive.pose(0.0))
-        replay.wait_until_subscribed([pose_pub], "the localizer and the provider nodelet (one manager)")
+        replay.wait_until_subscribed([pose_pub], f"the localizer and the provider ({provider})")
         cls.outage: list[float] = []  # wall times nginx went down and came back
         timer = threading.Thread(target=cls.interrupt_server, daemon=True)
         timer.start()
@@ -114,6 +121,11 @@ class MapStoreStackTest(replay.DriveReplayTest):
         self.assertTrue(down, "no warning that the map store is unreachable")
         self.assertIn(self.url + "/index.json", down[0])  # the last error names what failed
         self.assertTrue(any(f"map store {self.url} reachable" in t for t in texts), "no message that it is back")
+        # ~status says so too: unreachable with the last error naming the URL, then reachable again.
+        down_status = [s for s in self.provider if not s.store_reachable]
+        self.assertTrue(down_status, "no ~status with store_reachable false")
+        self.assertIn(self.url + "/index.json", down_status[0].store_error)
+        self.assertTrue(self.provider[-1].store_reachable, "the last ~status still says unreachable")
         # Tiles entered the window while nginx was down: the localizer named each it could not fetch by its URL.
         failed = [t for t in texts if "map update failed" in t]
         self.assertTrue(failed, "no tile entered the window during the outage: lengthen it")

@@ -17,12 +17,13 @@ from grid_puzzle_localization.experiment.config import (
     NodeRoles,
     WindowPreset,
 )
-from grid_puzzle_localization.experiment.maps import ensure_blocks, ensure_submaps, ensure_tiles
+from grid_puzzle_localization.experiment.maps import check_store_tiles, ensure_blocks, ensure_submaps, ensure_tiles
 from grid_puzzle_localization.experiment.modes import DEFAULT_MODES, MODES
 from grid_puzzle_localization.experiment.runner import run_experiment
 from grid_puzzle_localization.experiment.scenario import read_scenario
 from grid_puzzle_localization.experiment.start import START_MODES, StartSetting
 from grid_puzzle_localization.report.markdown import printed_tables
+from grid_puzzle_localization.tiles.map_store import is_map_store_url
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -31,7 +32,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bag", help="rosbag with points, imu and /tf_static (overrides the scenario's)")
     parser.add_argument("--map", help="global map PCD (overrides the scenario's)")
     parser.add_argument("--ground-truth", help="ground truth TUM file (optional)")
-    parser.add_argument("--tiles", help="tile directory: reused if it holds the map tiles, else cut (OUT/tiles_s<S>)")
+    parser.add_argument(
+        "--tiles",
+        help="tile directory: reused if it holds the map tiles, else cut (OUT/tiles_s<S>); or the http(s):// URL of"
+        " a map store serving them (docs/map_store.md), fetched into the stores' disk cache",
+    )
     parser.add_argument(
         "--blocks", help="block map directory from `gpm blocks` (default: stitched from the map along the ground truth)"
     )
@@ -140,7 +145,7 @@ def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
         bag=Path(bag),
         global_map=Path(global_map),
         ground_truth=Path(gt) if gt else None,
-        tiles=Path(args.tiles) if args.tiles else None,
+        tiles=(args.tiles if is_map_store_url(args.tiles) else Path(args.tiles)) if args.tiles else None,
         blocks=Path(args.blocks) if args.blocks else None,
         submaps=Path(args.submaps) if args.submaps else None,
         block_size_m=args.block_size,
@@ -172,15 +177,20 @@ def run(args: argparse.Namespace) -> int:
     cfg = config_from_args(args)
     cfg.check()
     cfg.out_dir.mkdir(parents=True, exist_ok=True)
-    tile_dir = cfg.tiles or cfg.out_dir / f"tiles_s{cfg.window.grid_size_m:g}"
-    tiles = ensure_tiles(cfg.global_map, tile_dir, cfg.window.grid_size_m)
+    if isinstance(cfg.tiles, str):  # a map store: its tiles are not on this disk, so no storage figures of them
+        tiles = check_store_tiles(cfg.tiles, cfg.window.grid_size_m)
+    else:
+        tiles = ensure_tiles(
+            cfg.global_map, cfg.tiles or cfg.out_dir / f"tiles_s{cfg.window.grid_size_m:g}", cfg.window.grid_size_m
+        )
     blocks = submaps = None
     if "block_map" in cfg.modes:
         size = cfg.block_size_m
         blocks = cfg.blocks or ensure_blocks(cfg.global_map, cfg.ground_truth, cfg.out_dir / f"blocks_S{size:g}", size)
         submaps = ensure_submaps(cfg.global_map, cfg.submaps or cfg.out_dir / f"submaps_L{size:g}", size)
         cfg = dataclasses.replace(cfg, blocks=blocks)
-    summary = run_experiment(cfg, tiles, storage_figures(cfg.global_map, tiles, blocks, submaps))
+    local_tiles = None if isinstance(tiles, str) else tiles
+    summary = run_experiment(cfg, tiles, storage_figures(cfg.global_map, local_tiles, blocks, submaps))
     print("\n".join(printed_tables(summary)))
     print(f"\nreport: {cfg.out_dir / 'report.md'}, plots: {cfg.out_dir / 'plots'}/")
     return 0

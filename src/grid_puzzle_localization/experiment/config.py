@@ -48,7 +48,7 @@ class ExperimentConfig:
     bag: Path
     global_map: Path
     ground_truth: Path | None = None
-    tiles: Path | None = None  # None: cut from global_map into out_dir/tiles
+    tiles: Path | str | None = None  # a tile directory or a map store URL; None: cut from global_map into out_dir
     blocks: Path | None = None  # block map directory from `gpm blocks`; None: built from global_map along ground_truth
     block_size_m: float = BlockConfig.block_size  # S of the blocks built when blocks is None
     submaps: Path | None = None  # fixed-size submaps of side S for the storage table; None: cut into out_dir

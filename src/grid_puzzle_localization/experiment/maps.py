@@ -1,8 +1,9 @@
 """Map preparation for the experiment: the grid puzzle tiles of the global map, cut once with the
-tiler and reused while their index matches the map and the grid size."""
+tiler and reused while their index matches the map and the grid size, or a map store serving them."""
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -31,6 +32,21 @@ def ensure_tiles(global_map: str | os.PathLike, tile_dir: str | os.PathLike, gri
     print(f"gpm experiment: cutting {global_map} into {grid_size_m} m tiles in {tile_dir}")
     tile_map([global_map], tile_dir, TileConfig(grid_size=grid_size_m, progress=False, force=True))
     return tile_dir
+
+
+def check_store_tiles(url: str, grid_size_m: float) -> str:
+    """``url``, a map store (docs/map_store.md) whose index lists tiles of side ``grid_size_m``; UserError naming
+    the URL when it cannot be reached (with nothing of it in the cache) or is tiled otherwise. The runs' localizer
+    and provider fetch the tiles themselves."""
+    from grid_puzzle_localization.tiles.map_store import MapStore
+
+    store = MapStore(url)
+    try:
+        if not math.isclose(store.grid_size, grid_size_m, rel_tol=1e-9):
+            raise UserError(f"{url} serves tiles of {store.grid_size:g} m, not {grid_size_m:g} m: pass --grid-size")
+    finally:
+        store.close()
+    return url
 
 
 EMPTY_MAP_POINT = (1.0e5, 1.0e5, 0.0)  # [m] the empty map's one point, far from any route

@@ -71,7 +71,7 @@ def first_scan_stamp(bag: str | os.PathLike, topic: str = "points") -> float | N
 
 
 def launch_args(
-    cfg: ExperimentConfig, mode: str, global_map: Path, tiles: Path | None, initial_pose: list[float] | None
+    cfg: ExperimentConfig, mode: str, global_map: Path, tiles: Path | str | None, initial_pose: list[float] | None
 ) -> dict[str, object]:
     """roslaunch arguments of a mode; ``initial_pose`` None: the localizer gets none."""
     launch = LAUNCH_MODES[mode]
@@ -93,7 +93,7 @@ def launch_args(
     if launch.provider is not None:
         args["provider"] = launch.provider
     if tiles is not None:
-        args["tiles"] = tiles.resolve()
+        args["tiles"] = tiles if isinstance(tiles, str) else tiles.resolve()  # a directory, or a map store's URL
     if mode == "block_map":
         args["blocks"] = cfg.blocks.resolve()
     return args
@@ -180,7 +180,7 @@ class ModeInputs:
     """What one run of a mode plays against, and for how long."""
 
     global_map: Path
-    tiles: Path | None  # the grid puzzle modes' tile directory
+    tiles: Path | str | None  # the grid puzzle modes' tile directory, or a map store's URL
     out: Path  # the run's directory (emptied first)
     duration_s: float | None = None  # seconds of the bag to play; None: all of it
     record: bool = True  # record the trajectory (and require one)
@@ -244,7 +244,7 @@ def run_empty_map(cfg: ExperimentConfig, mode: str, start: Start) -> ModeOutcome
         return run_mode(cfg, mode, inputs, start)
 
 
-def run_experiment(cfg: ExperimentConfig, tiles: Path | None, storage: dict | None) -> dict:
+def run_experiment(cfg: ExperimentConfig, tiles: Path | str | None, storage: dict | None) -> dict:
     """Every mode in turn, then the report. Returns the summary."""
     cfg.check()
     cfg.out_dir.mkdir(parents=True, exist_ok=True)

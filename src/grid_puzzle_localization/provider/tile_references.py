@@ -4,7 +4,9 @@ likely to enter next, without reading a single point (the localizer reads the fi
 ``TileReferences.update(window, ahead)`` returns the keys that entered and left since the last update
 and the prefetch list (tiles of the ``ahead`` windows, most likely first, that are not in the window).
 ``refresh()`` notices a tile directory rewritten under the running node (a new index revision) and
-reopens it; the caller then sends the whole window again as a reset. Not thread-safe (the provider
+reopens it; the caller then sends the whole window again as a reset. A map given by URL (a map store,
+tiles/map_store.py) is listed by the index the store holds, and its revision is the store's: the caller
+polls the store, and refresh() takes up the revision that poll brought. Not thread-safe (the provider
 serialises its updates).
 """
 
@@ -14,12 +16,15 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Tuple
+from typing import TYPE_CHECKING, Tuple
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.provider.window import Window
 from grid_puzzle_localization.tiles.directory import Key, TileDirectory, decode_key, open_tile_directory
 from grid_puzzle_localization.tiling.index import INDEX_FILE
+
+if TYPE_CHECKING:
+    from grid_puzzle_localization.tiles.map_store import MapStore
 
 PREFETCH_MAX_TILES = 256  # bound of one prefetch list: the localizer's byte budget bounds what it reads
 
@@ -56,10 +61,18 @@ def box_minus(a: Box, b: Box) -> list[Box]:
     return [box for box in strips if box[0] <= box[1] and box[2] <= box[3]]
 
 
+def open_store_directory(store: MapStore, grid_size: float | None = None) -> TileDirectory:
+    """The tiles of a map store's index in use, from its cached copy of index.json."""
+    return open_tile_directory(store.index_path().parent, grid_size)
+
+
 class TileReferences:
-    def __init__(self, directory: TileDirectory) -> None:
+    def __init__(self, directory: TileDirectory, store: MapStore | None = None) -> None:
+        """``store``: the map store ``directory`` lists (open_store_directory), for a map given by URL."""
         self.directory = directory
-        self.revision = index_revision(directory.path)
+        self.store = store
+        self.location = store.url if store is not None else str(directory.path)  # what tile_delta names
+        self.revision = self._current_revision()
         self._loaded: set[int] = set()  # codes (tiles.directory.encode_key) of the window's tiles
         self._box: Box | None = None  # the window they fill
 
@@ -100,7 +113,7 @@ class TileReferences:
         """Reopens the directory when its index revision changed; True then (the window must be sent
         again as a reset). Raises UserError when the directory became unusable (the old one is kept)."""
         try:
-            revision = index_revision(self.directory.path)
+            revision = self._current_revision()
         except OSError as err:
             raise UserError(
                 f"tile directory {self.directory.path} cannot be read any more ({err.strerror});"
@@ -113,3 +126,6 @@ class TileReferences:
         self._loaded = set()
         self._box = None
         return True
+
+    def _current_revision(self) -> str:
+        return self.store.revision if self.store is not None else index_revision(self.directory.path)

@@ -82,6 +82,7 @@ def provider_status(
     msg.tiles_removed = len(delta.removed_ids)
     msg.tiles_prefetch = len(delta.prefetch_ids)
     msg.update_ms = update_ms
+    msg.store_reachable = True  # a directory; a map store's provider sets its own state
     return msg
 
 

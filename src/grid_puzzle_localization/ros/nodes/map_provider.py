@@ -12,7 +12,9 @@ While the localizer reports itself lost (its NdtStatus on ``localizer_status``) 
 region its search covers (``lost/max_half_side``) and stops following the coasting pose; the first pose after it
 tracks again recomputes the window there.
 A tile directory rewritten under the running node (a new index revision) is reopened and the whole window
-sent again as a reset delta.
+sent again as a reset delta. A tile directory given by URL (a map store: docs/map_store.md) is listed by its
+index.json, polled every ``map_store/poll_period``; the localizer fetches the tiles. ``~status`` says whether the
+store's server answers, and its last error.
 Delta protocol: every broadcast delta increments ``revision`` by one; a new
 subscriber first receives a ``reset`` delta of the whole window carrying the current revision; the
 service ``~resend`` (std_srvs/Trigger) broadcasts a reset delta so a subscriber that saw a revision gap
@@ -35,12 +37,13 @@ from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.msg import NdtStatus, ProviderStatus, TileDelta
 from grid_puzzle_localization.provider.config import ProviderConfig, load_config
 from grid_puzzle_localization.provider.lost_search import SearchRegion, hint_region
-from grid_puzzle_localization.provider.tile_references import TileReferences
+from grid_puzzle_localization.provider.tile_references import TileReferences, open_store_directory
 from grid_puzzle_localization.provider.window import PoseSample, Window, WindowTracker
 from grid_puzzle_localization.provider.window_server import Served, WindowServer
 from grid_puzzle_localization.ros.msgs.provider import pose_sample, provider_status, stamped, tile_delta
 from grid_puzzle_localization.ros.saved_pose import SavedPoseWriter, read_saved_pose
 from grid_puzzle_localization.tiles.directory import open_tile_directory
+from grid_puzzle_localization.tiles.map_store import MapStore, MapStoreConfig, is_map_store_url
 from grid_puzzle_localization.util.malloc_tuning import limit_arenas, pin_mmap_threshold
 
 WARN_PERIOD = 5.0  # [s] throttle of repeated warnings (off the map, wrong frame)
@@ -56,10 +59,15 @@ class ResetOnSubscribe(rospy.SubscribeListener):
 
 
 class MapProviderNode:
-    def __init__(self, config: ProviderConfig) -> None:
+    def __init__(self, config: ProviderConfig, store_config: MapStoreConfig) -> None:
         self.config = config.checked()
         tiles = self.config.tiles
-        directory = open_tile_directory(os.path.abspath(tiles.dir), tiles.grid_size or None)
+        # A map given by URL must answer now, or have its index in the cache (UserError naming the URL otherwise).
+        self.store = MapStore(tiles.dir, store_config) if is_map_store_url(tiles.dir) else None
+        if self.store is not None:
+            directory = open_store_directory(self.store, tiles.grid_size or None)
+        else:
+            directory = open_tile_directory(os.path.abspath(tiles.dir), tiles.grid_size or None)
         self.s = directory.grid_size
         if directory.unparsable:
             rospy.logwarn(
@@ -70,7 +78,9 @@ class MapProviderNode:
                 ", ".join(directory.unparsable[:10]),
             )
         self.server = WindowServer(
-            WindowTracker(self.config.window, self.s), TileReferences(directory), self.config.lost.max_half_side
+            WindowTracker(self.config.window, self.s),
+            TileReferences(directory, self.store),
+            self.config.lost.max_half_side,
         )
         self.frame = self.config.map_frame
         # Serialises tile set updates and every publish on tile_delta, so a reset sent to a new subscriber
@@ -85,12 +95,19 @@ class MapProviderNode:
         self._started = time.monotonic()
         self._whole_map_tried = False
         self._pose_ready = threading.Condition()
+        self._next_poll = time.monotonic() + store_config.poll_period
+        self._store_reachable = True
+        self._last_status: ProviderStatus | None = None  # worker only
 
         self.delta_pub = rospy.Publisher(
             "tile_delta", TileDelta, queue_size=50, subscriber_listener=ResetOnSubscribe(self)
         )
         self.map_cloud = None
-        if self.config.publish_map_cloud:
+        if self.config.publish_map_cloud and self.store is not None:
+            rospy.logerr(
+                "publish_map_cloud needs a local tile directory, not the URL %s; map_cloud is not published", tiles.dir
+            )
+        elif self.config.publish_map_cloud:
             # Imported only here: reading and merging tiles needs numpy, which the node otherwise never loads
             # (about 15 MiB of RSS).
             from grid_puzzle_localization.ros.msgs.map_cloud_publisher import MapCloudPublisher
@@ -220,6 +237,7 @@ class MapProviderNode:
             if tracking_again:
                 with self._lock:
                     self.server.end_search()  # the next pose is measured again: the window goes back to it
+            self._poll_store()
             self._follow_directory()
             if search is not None:
                 self._cover_search(search)
@@ -280,6 +298,32 @@ class MapProviderNode:
             )
             self._publish(served, start)
 
+    def _poll_store(self) -> None:
+        """Asks the map store for a new index revision when due (outside the lock: the network may be slow);
+        _follow_directory then takes it up. Says when the server stops or starts answering."""
+        if self.store is None or time.monotonic() < self._next_poll:
+            return
+        self._next_poll = time.monotonic() + self.store.config.poll_period
+        try:
+            self.store.poll_index()
+        except (UserError, OSError) as err:
+            rospy.logerr_throttle(WARN_PERIOD, "map store %s: new index not used: %s", self.store.url, err)
+        status = self.store.status
+        if not status.reachable:
+            rospy.logwarn_throttle(
+                WARN_PERIOD,
+                "map store %s unreachable (%s): serving the tiles of index revision %s, retrying every %g s",
+                status.url,
+                status.last_error,
+                status.revision,
+                self.store.config.poll_period,
+            )
+        elif not self._store_reachable:
+            rospy.loginfo("map store %s reachable (index revision %s)", status.url, status.revision)
+        if status.reachable != self._store_reachable:
+            self._store_reachable = status.reachable
+            self._publish_status()
+
     def _follow_directory(self) -> None:
         """Sends the whole window again when the tile directory was rewritten (new index revision)."""
         try:
@@ -291,7 +335,7 @@ class MapProviderNode:
         if changed:
             rospy.logwarn(
                 "tile directory %s changed (index revision %s): sending the whole window again",
-                self.server.tiles.directory.path,
+                self.server.tiles.location,
                 self.server.tiles.revision,
             )
             self.send_reset(self.delta_pub.publish, increment=True)
@@ -313,7 +357,17 @@ class MapProviderNode:
         if self.map_cloud is not None and (served.first or delta.added or delta.removed):
             self.map_cloud.changed(stamp)
         update_ms = (time.perf_counter() - start) * 1e3
-        self.status_pub.publish(provider_status(stamped(self.frame, stamp), window, msg, loaded, update_ms))
+        self._last_status = provider_status(stamped(self.frame, stamp), window, msg, loaded, update_ms)
+        self._publish_status()
+
+    def _publish_status(self) -> None:
+        """~status of the last window, with the map store's state (a change of it alone publishes it again)."""
+        if self._last_status is None:
+            return
+        if self.store is not None:
+            status = self.store.status
+            self._last_status.store_reachable, self._last_status.store_error = status.reachable, status.last_error
+        self.status_pub.publish(self._last_status)
 
     def _delta_msg(self, stamp, window: Window, reset: bool, added, removed, prefetch):
         return tile_delta(
@@ -322,7 +376,7 @@ class MapProviderNode:
             reset,
             self.s,
             window,
-            str(self.server.tiles.directory.path),
+            self.server.tiles.location,
             self.server.tiles.revision,
             added,
             removed,
@@ -369,8 +423,11 @@ def main() -> None:
     limit_arenas(1)  # before rospy starts its threads
     rospy.init_node("grid_puzzle_map_provider")
     try:
-        config = load_config(lambda name, default: rospy.get_param("~" + name, default))
-        MapProviderNode(config)
+
+        def get(name, default):
+            return rospy.get_param("~" + name, default)
+
+        MapProviderNode(load_config(get), load_config(get, MapStoreConfig, "map_store/"))
     except UserError as err:
         rospy.logfatal("grid_puzzle_map_provider: %s", err)
         sys.exit(2)
