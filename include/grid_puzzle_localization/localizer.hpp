@@ -66,9 +66,14 @@ struct HypothesesConfig {
 /// Once the prediction is no longer extrapolated, scans that nothing else matched run the branch-and-bound
 /// global search around the last accepted pose (the bounded region, every yaw when the rotation is not
 /// known), at most once per search_period [s] > 0 of scan time (a search takes about a second).
+/// A given initial pose that the first scan does not fit (once the map around it has arrived) is wrong: the
+/// square of side initial_pose_search_size [m] >= 0 around it is searched at once over every yaw (0 = only the
+/// bounded region, which grows with the time since), and until a match is accepted the later searches try every
+/// yaw too.
 struct LostConfig {
   double max_coast_time = 2.0;
   double search_period = 1.0;
+  double initial_pose_search_size = 60.0;
 
   std::string validate() const;
 };
@@ -237,6 +242,7 @@ class Localizer {
   GlobalLocalizer global_;
   std::shared_ptr<const VoxelMap> global_target_;  // the target global_ was given (rebuilt when it changes)
   std::optional<double> last_global_search_;       // scan stamp of the last recovery search
+  bool start_refused_ = false;  // the given initial pose fitted no scan: its heading is not trusted either
 };
 
 }  // namespace grid_puzzle_localization

@@ -96,6 +96,7 @@ void Localizer::reset() {
   fusion_.reset();
   gyro_.clear();
   pending_initial_pose_ = default_initial_pose_;
+  start_refused_ = false;
   last_stamp_.reset();
   source_stamp_.reset();
   motion_seen_ = MotionBounds();
@@ -170,6 +171,7 @@ void Localizer::startFrom(const Eigen::Isometry3d& pose, double stamp, const Mat
   last_covariance_ = covariance;
   reference_nvtl_ = reference_nvtl;
   last_global_search_.reset();
+  start_refused_ = false;
 }
 
 std::optional<NdtResult> Localizer::tryHypotheses(const Eigen::Isometry3d& guess, const Eigen::Isometry3d& held,
@@ -344,19 +346,28 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     }
   }
   // No trusted prediction (start-up, a gap, a loss) or nothing fitted from it: the branch-and-bound search of the
-  // bounded region (every yaw after a gap when the rotation is not known), at most once per search_period.
+  // bounded region (every yaw after a gap or a refused start when the rotation is not known), at most once per
+  // search_period. A given pose that the scan does not fit is wrong: once its map has arrived, the square of
+  // lost/initial_pose_search_size around it is searched at once, every yaw.
+  const bool map_loading = out.map_update_pending || worker_.busy();
   const bool long_gap = !fresh && elapsed > config_.prediction.max_extrapolation;
   const bool search_due = !long_gap || !last_global_search_ ||
                           stamp - *last_global_search_ >= config_.lost.search_period || stamp < *last_global_search_;
   std::optional<Eigen::Isometry3d> found_globally;
   if ((!best || poor(*best)) && search_due) {
     SearchRegion wide = region;
-    if (long_gap && !rotation_known) wide.yaw_range = M_PI;
+    if ((long_gap || start_refused_) && !rotation_known) wide.yaw_range = M_PI;
+    // The square around a wrong start bounds where the pose is; no motion since it bounds it further.
+    const bool start_search = fresh && !map_loading && config_.lost.initial_pose_search_size > 0.0;
+    if (start_search) {
+      wide.radius = std::max(wide.radius, 0.5 * config_.lost.initial_pose_search_size);
+      wide.yaw_range = M_PI;
+    }
     GlobalLocalizationResult g = searchGlobally(wide);
     last_global_search_ = stamp;
     out.global_search = true;
     out.global_search_reason = g.reason;
-    if (g.found && reachable(g.refinement)) {
+    if (g.found && (start_search || reachable(g.refinement))) {
       best = g.refinement;
       found_globally = g.map_T_base;
     }
@@ -377,7 +388,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     out.pose = found_globally ? *found_globally : toIsometry(out.ndt.transform);
     if (!out.pose.matrix().allFinite()) out.match_accepted = false;
   }
-  if (fresh && !out.match_accepted && (out.map_update_pending || worker_.busy())) {
+  if (fresh && !out.match_accepted && map_loading) {
     // The map around a new initial pose may still be loading (a window of tiles arrives over the first scans): the
     // pose is kept for the next scan instead of being searched from as a lost track.
     pending_initial_pose_ = predictor_.pose();
@@ -388,6 +399,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   }
   out.lost = !out.match_accepted;
   if (out.lost) out.search_region = region;
+  start_refused_ = out.lost && (fresh || start_refused_);
   out.since_last_match = fresh ? 0.0 : elapsed;
   if (out.match_accepted) {
     out.recovered = !fresh && elapsed > config_.lost.max_coast_time;

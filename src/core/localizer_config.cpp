@@ -45,6 +45,8 @@ std::string LostConfig::validate() const {
   std::ostringstream err;
   if (!(max_coast_time > 0.0)) err << "lost/max_coast_time must be > 0 s (got " << max_coast_time << "); ";
   if (!(search_period > 0.0)) err << "lost/search_period must be > 0 s (got " << search_period << "); ";
+  if (!(initial_pose_search_size >= 0.0))
+    err << "lost/initial_pose_search_size must be >= 0 m (got " << initial_pose_search_size << "); ";
   return err.str();
 }
 

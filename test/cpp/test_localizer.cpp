@@ -458,6 +458,7 @@ TEST(Localizer, LostStopsPublishingThenTheGlobalSearchRecovers) {
   // compare against, the start cannot tell a poor match otherwise.
   c.match.min_nvtl = 1.5;
   c.lost.max_coast_time = 1.0;
+  c.lost.initial_pose_search_size = 0.0;  // only the bounded region (AWrongInitialPoseIsSearchedAroundAtOnce)
   const Eigen::Isometry3d truth = t::poseXYYaw(4.0, -3.0, 0.3);
   const gpl::PointCloud world = t::makeWorld();
   gpl::Localizer loc(c);
@@ -489,6 +490,39 @@ TEST(Localizer, LostStopsPublishingThenTheGlobalSearchRecovers) {
       loc.processScan(*recovered_at + 0.1, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 800), mount());
   EXPECT_TRUE(out.match_accepted);
   EXPECT_LT(t::translationError(out.pose, truth), 0.05);
+}
+
+// A given pose 20 m and 90 deg off: the first scan does not fit it, so the square of lost/initial_pose_search_size
+// around it is searched at once over every yaw and the first scan is placed. The control, with that size 0, searches
+// only the bounded region around the wrong pose, whose radius and yaw range grow with the time since: the first
+// scan is refused.
+TEST(Localizer, AWrongInitialPoseIsSearchedAroundAtOnce) {
+  gpl::LocalizerConfig c = testConfig();
+  c.match.min_nvtl = 1.5;  // as in LostStopsPublishingThenTheGlobalSearchRecovers
+  const Eigen::Isometry3d truth = t::poseXYYaw(4.0, -3.0, 0.3);
+  const gpl::PointCloud world = t::makeWorld();
+  for (const double size : {60.0, 0.0}) {
+    c.lost.initial_pose_search_size = size;
+    gpl::Localizer loc(c);
+    loc.map().submit(gpl::MapChange::fullCloud(world));
+    loc.map().waitIdle();
+    loc.setInitialPose(truth * t::poseXYYaw(14.0, -14.0, M_PI / 2));
+    const gpl::LocalizerOutput out =
+        loc.processScan(0.0, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 900), mount());
+    EXPECT_TRUE(out.global_search) << "size " << size;
+    if (size > 0.0) {
+      ASSERT_TRUE(out.match_accepted) << out.global_search_reason;
+      EXPECT_LT(t::translationError(out.pose, truth), 0.05);
+      EXPECT_LT(t::rotationError(out.pose, truth), 0.005);
+      const gpl::LocalizerOutput next =
+          loc.processScan(0.1, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 901), mount());
+      EXPECT_TRUE(next.match_accepted);
+      EXPECT_LT(t::translationError(next.pose, truth), 0.05);
+    } else {
+      EXPECT_FALSE(out.match_accepted);
+      EXPECT_TRUE(out.lost);
+    }
+  }
 }
 
 // Hand-held at 2 Hz without a gyro: the yaw swings +-30 deg about the walking direction in step with the scans, so
