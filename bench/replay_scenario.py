@@ -2,7 +2,8 @@
 fast as it runs, against the whole map from the first scan's reference pose, with the localizer's default
 parameters. Prints one JSON line: scans with an accepted match, scans published, and the translation error of the
 published poses against the reference (median, max, RMSE). For working on tracking: a minute of real-time
-playback through `gpm experiment` takes a few seconds here. --trace FILE keeps the per-scan CSV."""
+playback through `gpm experiment` takes a few seconds here. --trace FILE keeps the per-scan CSV; other options go to
+bench_localizer (e.g. --resolution 1.0)."""
 
 from __future__ import annotations
 
@@ -22,6 +23,8 @@ from grid_puzzle_localization.blocks.poses import pose_matrix, read_tum
 from grid_puzzle_localization.experiment.scenario import read_scenario
 from grid_puzzle_localization.pcd import read_pcd, xyz_array
 from grid_puzzle_localization.ros.msgs.cloud import cloud_to_array
+
+QUANTILES = (("p50", 50), ("p95", 95), ("p99", 99), ("max", 100))  # of the per-scan time
 
 
 def _transform(t) -> np.ndarray:
@@ -68,12 +71,13 @@ def main() -> int:
     parser.add_argument("--trace", type=Path, help="per-scan CSV (default: a temporary file)")
     workspace = Path(os.environ["GPL_WS"])  # exported by tools/env.sh
     parser.add_argument("--exe", type=Path, default=workspace / "devel/lib/grid_puzzle_localization/bench_localizer")
-    args = parser.parse_args()
+    args, bench_options = parser.parse_known_args()  # the rest goes to bench_localizer (e.g. --resolution 1.0)
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp) / "input.bin"
         write_input(args.scenario, data)
         trace = args.trace or Path(tmp) / "trace.csv"
-        done = subprocess.run([str(args.exe), str(data), "replay", "--trace", str(trace)], capture_output=True)
+        command = [str(args.exe), str(data), "replay", "--trace", str(trace), *bench_options]
+        done = subprocess.run(command, capture_output=True)
         if done.returncode != 0:
             sys.stderr.write(done.stderr.decode())
             return done.returncode
@@ -96,7 +100,7 @@ def main() -> int:
                     "max": round(float(errors.max()), 3) if errors.size else None,
                     "rmse": round(float(np.sqrt(np.mean(errors**2))), 3) if errors.size else None,
                 },
-                "scan_ms_median": round(float(np.median(rows["scan_ms"])), 1),
+                "scan_ms": {q: round(float(np.percentile(rows["scan_ms"], p)), 1) for q, p in QUANTILES},
             }
         )
     )
