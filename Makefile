@@ -102,12 +102,13 @@ bench-global-localization: setup
 
 # ---------------------------------------------------------------- map store (tiles over HTTP)
 .PHONY: bench-map-store
-# make bench-map-store [ARGS="--quick"]: a window of tiles fetched from nginx on localhost (docs/map_store.md).
+# make bench-map-store [ARGS="--quick"]: tiles fetched from nginx on localhost, then a drive through the localizer
+# with its tiles fetched through a delaying proxy, the server stopped mid-drive (docs/map_store.md).
 # Build output goes to build/bench_map_store_build.log so stdout holds only the JSON lines.
 bench-map-store: setup
 	@log=$(ROOT)/build/bench_map_store_build.log; mkdir -p $(ROOT)/build; \
 	  bash $(ROOT)/tools/build.sh >$$log 2>&1 || { tail -40 $$log; exit 1; }
-	@$(SETUP) $$GPL_WS/devel/lib/grid_puzzle_localization/bench_map_store $(ARGS)
+	@$(SETUP) python3 $(ROOT)/bench/bench_map_store.py $(ARGS)
 
 # ---------------------------------------------------------------- block maps
 .PHONY: bench-blocks

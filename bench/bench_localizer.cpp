@@ -9,9 +9,14 @@
 //
 // Usage: bench_localizer INPUT.bin cloud|tiles|repeat|replay [--tile-size S] [--window N] [--threads T] [--resolution
 // R]
-//                        [--max-range M] [--trace FILE]
+//                        [--max-range M] [--trace FILE] [--tile-source DIR|URL] [--index-revision REV]
+//                        [--map-store-cache DIR]
 // --trace writes one CSV row per scan (latency, NDT iterations, prediction and ground-truth errors, whether the
-// match was accepted and the pose published) to FILE.
+// match was accepted and the pose published, the pose, the monotonic clock, whether the map store answers) to FILE.
+// --tile-source: tiles mode names the window's tiles by reference, as the provider does, in a tile directory that
+// `gpm tile` cut from the same map with the same tile size, or at the URL of a map store serving one (fetched into
+// --map-store-cache; --index-revision is then the revision of its index.json, as the provider sends it);
+// bench/bench_map_store.py runs it behind a delaying proxy.
 // INPUT.bin (little endian) is written by bench/bench_localizer.py:
 //   char[8] "GPLBENCH"; f64 rate_hz; u64 n_map; f32 map[n_map][3]; f64 base_T_sensor[16] (row-major);
 //   u64 n_imu; f64 imu[n_imu][4] (stamp, gyro x y z in base_link [rad/s]);
@@ -36,6 +41,7 @@
 #include <vector>
 
 #include "grid_puzzle_localization/localizer.hpp"
+#include "grid_puzzle_localization/provider/tile_directory.hpp"
 
 namespace gpl = grid_puzzle_localization;
 
@@ -114,11 +120,7 @@ Scan readScan(std::ifstream& in) {
 using TileKey = std::pair<int, int>;
 
 // The tile's file stem as the tiler names it: its centre [m] ("cx_cy"), from which the map worker gets (i, j).
-std::string tileId(const TileKey& k, double s) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.6g_%.6g", (k.first + 0.5) * s, (k.second + 0.5) * s);
-  return buf;
-}
+std::string tileId(const TileKey& k, double s) { return gpl::tileStem(k.first, k.second, s); }
 
 std::map<TileKey, gpl::PointCloud> cutTiles(const gpl::PointCloud& map, double s) {
   std::map<TileKey, gpl::PointCloud> tiles;
@@ -142,6 +144,13 @@ double threadCpuMs() {
   timespec ts{};
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
   return 1e3 * static_cast<double>(ts.tv_sec) + 1e-6 * static_cast<double>(ts.tv_nsec);
+}
+
+// CLOCK_MONOTONIC [s], as Python's time.monotonic() reads it: a trace row can be set against events in another process.
+double monotonicSeconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
 }
 
 // Angle [rad] of the rotation between the orientations of a and b.
@@ -205,7 +214,7 @@ int main(int argc, char** argv) {
     std::fprintf(
         stderr,
         "usage: %s INPUT.bin cloud|tiles|repeat|replay [--tile-size S] [--window N] [--threads T] [--resolution R] "
-        "[--max-range M] [--trace FILE]\n",
+        "[--max-range M] [--trace FILE] [--tile-source DIR|URL] [--index-revision REV] [--map-store-cache DIR]\n",
         argv[0]);
     return 2;
   }
@@ -218,7 +227,8 @@ int main(int argc, char** argv) {
   int half_window = 3;
   int threads = -1;  // -1: the LocalizerConfig default
   gpl::LocalizerConfig config;
-  std::string trace_path;
+  gpl::MapStoreConfig store_config;
+  std::string trace_path, tile_source, index_revision;
   for (int i = 3; i + 1 < argc; i += 2) {
     const std::string opt = argv[i];
     if (opt == "--tile-size")
@@ -233,6 +243,12 @@ int main(int argc, char** argv) {
       config.preprocess.max_range = std::stod(argv[i + 1]);
     else if (opt == "--trace")
       trace_path = argv[i + 1];
+    else if (opt == "--tile-source")
+      tile_source = argv[i + 1];
+    else if (opt == "--index-revision")
+      index_revision = argv[i + 1];
+    else if (opt == "--map-store-cache")
+      store_config.cache_dir = argv[i + 1];
     else {
       std::fprintf(stderr, "bench_localizer: unknown option %s\n", opt.c_str());
       return 2;
@@ -250,6 +266,7 @@ int main(int argc, char** argv) {
 
   if (threads >= 0) config.ndt.threads = threads;
   gpl::Localizer loc(config);
+  loc.map().setMapStoreConfig(store_config);
   const auto tiles = cutTiles(input.map, tile_size);
 
   // The map follows the localizer's own pose, as the tile provider follows odom. cloud mode gets the
@@ -268,6 +285,16 @@ int main(int argc, char** argv) {
       gpl::PointCloud merged;
       for (const TileKey& k : want) merged.insert(merged.end(), tiles.at(k).begin(), tiles.at(k).end());
       loc.map().submit(gpl::MapChange::fullCloud(std::move(merged)));
+    } else if (!tile_source.empty()) {
+      gpl::TileFileChange files;
+      files.dir = tile_source;
+      files.index_revision = index_revision;
+      files.reset = loaded.empty();
+      for (const TileKey& k : want)
+        if (!loaded.count(k)) files.added.push_back(tileId(k, tile_size));
+      for (const TileKey& k : loaded)
+        if (!want.count(k)) files.removed.push_back(tileId(k, tile_size));
+      loc.map().submit(gpl::MapChange::tileFiles(tile_size, std::move(files)));
     } else {
       std::vector<gpl::TileCloud> added;
       std::vector<std::string> removed;
@@ -295,7 +322,8 @@ int main(int argc, char** argv) {
     }
     trace << "scan,stamp_s,scan_ms,align_ms,cpu_ms,iterations,evaluations,source_points,update_pending,"
              "prediction_to_match_m,prediction_to_match_rad,prediction_error_m,prediction_error_rad,error_m,error_rad,"
-             "truth_yaw_rate_rad_s,accepted,published,hypotheses,global_search,nvtl,global_search_reason\n";
+             "truth_yaw_rate_rad_s,accepted,published,hypotheses,global_search,nvtl,global_search_reason,x,y,yaw,"
+             "monotonic_s,map_store_reachable\n";
   }
   // latency_loading: scans that overlapped a target update and ran no branch-and-bound search (a search, e.g. on
   // the first scan without a measured velocity, costs tens of ms whatever the map does).
@@ -303,6 +331,7 @@ int main(int argc, char** argv) {
   std::size_t searches = 0;
   double first_scan_ms = 0.0;
   std::size_t rejected = 0;
+  double distance = 0.0;  // [m] driven (ground truth)
   std::uint64_t generation = loc.map().stats().generation;
   auto next = std::chrono::steady_clock::now();
   std::size_t gyro_fed = 0;
@@ -348,10 +377,14 @@ int main(int argc, char** argv) {
             << rotationAngle(out.prediction, scan.truth) << ','
             << (out.pose.translation() - scan.truth.translation()).norm() << ',' << rotationAngle(out.pose, scan.truth)
             << ',' << yaw_rate << ',' << out.match_accepted << ',' << out.publish << ',' << out.hypotheses << ','
-            << out.global_search << ',' << out.ndt.nvtl << ",\"" << reason << "\"\n";
+            << out.global_search << ',' << out.ndt.nvtl << ",\"" << reason << "\"," << std::setprecision(9)
+            << out.pose.translation().x() << ',' << out.pose.translation().y() << ','
+            << std::atan2(out.pose.linear()(1, 0), out.pose.linear()(0, 0)) << ',' << monotonicSeconds() << ','
+            << loc.map().stats().map_store_reachable << std::defaultfloat << std::setprecision(6) << '\n';
     }
     if (!out.match_accepted) ++rejected;
     errors.push_back((out.pose.translation() - scan.truth.translation()).norm());
+    distance += (scan.truth.translation() - last_truth.translation()).norm();
     const gpl::MapUpdateStats stats = loc.map().stats();
     if (stats.generation != generation) {
       generation = stats.generation;
@@ -360,7 +393,9 @@ int main(int argc, char** argv) {
     follow(out.pose.translation());
   }
   loc.map().waitIdle();
-  if (loc.map().stats().generation != generation) update_ms.push_back(loc.map().stats().update_ms);
+  const gpl::MapUpdateStats end = loc.map().stats();
+  if (end.generation != generation) update_ms.push_back(end.update_ms);
+  const std::vector<std::string> failed = loc.map().takeErrors();  // e.g. tiles a map store could not serve
 
   double mean_error = 0.0;
   for (double e : errors) mean_error += e / static_cast<double>(errors.size());
@@ -375,7 +410,8 @@ int main(int argc, char** argv) {
       "\"target_update_ms\": {\"median\": %.1f, \"max\": %.1f}, \"rejected_matches\": %zu, "
       "\"translation_error_m\": {\"mean\": %.4f, \"max\": %.4f}, \"map_points\": %zu, \"tile_size_m\": %.1f, "
       "\"window_tiles\": %d, \"ndt_threads\": %d, \"map_update_threads\": %d, \"gyro_samples\": %zu, "
-      "\"peak_rss_mb\": %.1f}\n",
+      "\"peak_rss_mb\": %.1f, \"distance_m\": %.1f, \"map_store\": {\"tiles_fetched\": %zu, \"bytes_fetched\": %llu, "
+      "\"reachable\": %s}, \"map_update_failures\": %zu}\n",
       mode.c_str(), static_cast<std::size_t>(input.scans), first_scan_ms, percentile(latency, 0.5),
       percentile(latency, 0.95), percentile(latency, 0.99), percentile(latency, 1.0),
       percentile(latency, 0.99) / percentile(latency, 0.5), percentile(latency_pending, 1.0), latency_pending.size(),
@@ -383,6 +419,7 @@ int main(int argc, char** argv) {
       percentile(cpu, 0.5), percentile(cpu, 0.99), updates, percentile(update_ms, 0.5), percentile(update_ms, 1.0),
       rejected, mean_error, percentile(errors, 1.0), input.map.size(), tile_size,
       (2 * half_window + 1) * (2 * half_window + 1), config.ndt.threads, config.map_update_threads, input.gyro.size(),
-      peakRssMb());
+      peakRssMb(), distance, end.map_store_fetched, static_cast<unsigned long long>(end.map_store_bytes),
+      end.map_store_reachable ? "true" : "false", failed.size());
   return 0;
 }

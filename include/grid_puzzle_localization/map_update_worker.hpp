@@ -85,6 +85,7 @@ struct MapUpdateStats {
   bool map_store_reachable = true;    ///< the last request reached its server
   std::string map_store_error;        ///< its last failure, naming the URL; "" if none
   std::size_t map_store_fetched = 0;  ///< tiles downloaded (the rest came from its disk cache)
+  std::uint64_t map_store_bytes = 0;  ///< tile bytes downloaded
 };
 
 class MapUpdateWorker {

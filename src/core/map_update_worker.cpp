@@ -533,6 +533,7 @@ void MapUpdateWorker::run() {
       stats_.map_store_reachable = store.reachable;
       stats_.map_store_error = store.reachable ? "" : "map store " + store.url + " unreachable: " + store.last_error;
       stats_.map_store_fetched = store.tiles_fetched;
+      stats_.map_store_bytes = store.bytes_fetched;
     }
     if (queue_.empty() && retired_.empty()) idle_.notify_all();
   }

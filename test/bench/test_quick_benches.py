@@ -21,7 +21,7 @@ QUICK = {
     "bench-tiling": [sys.executable, str(ROOT / "bench/bench_tiling.py"), "--quick"],
     "bench-provider": [sys.executable, str(ROOT / "bench/bench_provider.py"), "--quick"],
     "bench-ndt": [str(BIN / "bench_ndt"), "--quick"],
-    "bench-map-store": [str(BIN / "bench_map_store"), "--quick"],
+    "bench-map-store": [sys.executable, str(ROOT / "bench/bench_map_store.py"), "--quick"],
     "bench-localizer": [sys.executable, str(ROOT / "bench/bench_localizer.py"), "--quick"],
     "bench-sim": [sys.executable, str(ROOT / "bench/bench_sim.py"), "--quick"],
     "bench-blocks": [sys.executable, str(ROOT / "bench/bench_blocks.py"), "--quick"],
