@@ -75,6 +75,7 @@ void set(gpl::GlobalLocalizationConfig* c, const std::string& assignment) {
   const std::pair<const char*, int*> integers[] = {{"max_scan_points", &c->max_scan_points},
                                                    {"min_scan_points", &c->min_scan_points},
                                                    {"levels", &c->levels},
+                                                   {"max_poses", &c->max_poses},
                                                    {"initial_descents", &c->initial_descents},
                                                    {"refine_candidates", &c->refine_candidates},
                                                    {"ndt.max_iterations", &c->ndt.max_iterations}};
@@ -173,8 +174,9 @@ std::string json(const gpl::GlobalLocalizationResult& r, double cpu_seconds) {
      << ", \"runner_up_fit\": " << r.runner_up_fit << ", \"confidence\": " << r.confidence
      << ", \"seconds\": " << r.seconds << ", \"grid_seconds\": " << r.grid_seconds
      << ", \"search_seconds\": " << r.search_seconds << ", \"refine_seconds\": " << r.refine_seconds
-     << ", \"candidates_evaluated\": " << r.candidates_evaluated << ", \"scan_points_used\": " << r.scan_points_used
-     << ", \"cpu_seconds\": " << cpu_seconds
+     << ", \"candidates_evaluated\": " << r.candidates_evaluated << ", \"search_resolution\": " << r.search_resolution
+     << ", \"search_poses\": " << r.search_poses << ", \"local_poses\": " << r.local_poses
+     << ", \"scan_points_used\": " << r.scan_points_used << ", \"cpu_seconds\": " << cpu_seconds
      << ", \"ndt_transformation_probability\": " << r.refinement.transformation_probability
      << ", \"ndt_inlier_fraction\": " << r.refinement.inlier_fraction
      << ", \"explained_fraction\": " << r.explained_fraction << ", \"ndt_status\": \""
