@@ -68,8 +68,9 @@ struct HypothesesConfig {
 /// known), at most once per search_period [s] > 0 of scan time (a search takes about a second).
 /// A given initial pose that the first scan does not fit (once the map around it has arrived) is wrong: the
 /// square of side initial_pose_search_size [m] >= 0 around it is searched at once over every yaw (0 = only the
-/// bounded region, which grows with the time since), and until a match is accepted the later searches try every
-/// yaw too.
+/// bounded region, which grows with the time since). With a window of tiles that search runs only when the window
+/// holds all of its square: a look-alike place inside the window would otherwise win over the true one outside it.
+/// When it does not run or finds nothing, the later scans search the bounded region around the refused pose.
 struct LostConfig {
   double max_coast_time = 2.0;
   double search_period = 1.0;
@@ -201,6 +202,9 @@ class Localizer {
   GlobalLocalizationResult globalLocalize(const SearchRegion& region);
   /// The x y z extent of the current target's Gaussians (voxel means); empty without a map.
   std::optional<Eigen::AlignedBox3d> mapBounds() const;
+  /// Whether the map held reaches around the square of half side `half` [m] about `centre` (x y, map frame):
+  /// always with a whole map (nothing lies outside it), with a window of tiles when its extent holds the square.
+  bool mapHolds(const Eigen::Vector3d& centre, double half) const;
   /// The pose of the last accepted match, if any since the last reset.
   std::optional<Eigen::Isometry3d> lastAcceptedPose() const;
   /// True while the global search's structures (built by the last search) are held. They are released when a new
@@ -242,7 +246,6 @@ class Localizer {
   GlobalLocalizer global_;
   std::shared_ptr<const VoxelMap> global_target_;  // the target global_ was given (rebuilt when it changes)
   std::optional<double> last_global_search_;       // scan stamp of the last recovery search
-  bool start_refused_ = false;  // the given initial pose fitted no scan: its heading is not trusted either
 };
 
 }  // namespace grid_puzzle_localization

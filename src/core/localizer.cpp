@@ -96,10 +96,18 @@ void Localizer::reset() {
   fusion_.reset();
   gyro_.clear();
   pending_initial_pose_ = default_initial_pose_;
-  start_refused_ = false;
   last_stamp_.reset();
   source_stamp_.reset();
   motion_seen_ = MotionBounds();
+}
+
+bool Localizer::mapHolds(const Eigen::Vector3d& centre, double half) const {
+  if (worker_.stats().tiles == 0) return true;
+  const std::optional<Eigen::AlignedBox3d> box = mapBounds();
+  // Voxel means lie up to a voxel inside the area the tiles cover.
+  const double reach = half - config_.ndt.resolution;
+  return box && box->min().x() <= centre.x() - reach && box->max().x() >= centre.x() + reach &&
+         box->min().y() <= centre.y() - reach && box->max().y() >= centre.y() + reach;
 }
 
 std::optional<Eigen::AlignedBox3d> Localizer::mapBounds() const {
@@ -171,7 +179,6 @@ void Localizer::startFrom(const Eigen::Isometry3d& pose, double stamp, const Mat
   last_covariance_ = covariance;
   reference_nvtl_ = reference_nvtl;
   last_global_search_.reset();
-  start_refused_ = false;
 }
 
 std::optional<NdtResult> Localizer::tryHypotheses(const Eigen::Isometry3d& guess, const Eigen::Isometry3d& held,
@@ -346,8 +353,8 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     }
   }
   // No trusted prediction (start-up, a gap, a loss) or nothing fitted from it: the branch-and-bound search of the
-  // bounded region (every yaw after a gap or a refused start when the rotation is not known), at most once per
-  // search_period. A given pose that the scan does not fit is wrong: once its map has arrived, the square of
+  // bounded region (every yaw after a gap when the rotation is not known), at most once per search_period. A given
+  // pose that the scan does not fit is wrong: once the map held reaches around it, the square of
   // lost/initial_pose_search_size around it is searched at once, every yaw.
   const bool map_loading = out.map_update_pending || worker_.busy();
   const bool long_gap = !fresh && elapsed > config_.prediction.max_extrapolation;
@@ -356,11 +363,12 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   std::optional<Eigen::Isometry3d> found_globally;
   if ((!best || poor(*best)) && search_due) {
     SearchRegion wide = region;
-    if ((long_gap || start_refused_) && !rotation_known) wide.yaw_range = M_PI;
+    if (long_gap && !rotation_known) wide.yaw_range = M_PI;
     // The square around a wrong start bounds where the pose is; no motion since it bounds it further.
-    const bool start_search = fresh && !map_loading && config_.lost.initial_pose_search_size > 0.0;
+    const double start_half = 0.5 * config_.lost.initial_pose_search_size;
+    const bool start_search = fresh && !map_loading && start_half > 0.0 && mapHolds(held.translation(), start_half);
     if (start_search) {
-      wide.radius = std::max(wide.radius, 0.5 * config_.lost.initial_pose_search_size);
+      wide.radius = std::max(wide.radius, start_half);
       wide.yaw_range = M_PI;
     }
     GlobalLocalizationResult g = searchGlobally(wide);
@@ -399,7 +407,6 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   }
   out.lost = !out.match_accepted;
   if (out.lost) out.search_region = region;
-  start_refused_ = out.lost && (fresh || start_refused_);
   out.since_last_match = fresh ? 0.0 : elapsed;
   if (out.match_accepted) {
     out.recovered = !fresh && elapsed > config_.lost.max_coast_time;

@@ -92,9 +92,7 @@ class LocalizerRecoveryTest(replay.DriveReplayTest):
         self.assertTrue(stamps, "no status")
         first_status = track.statuses[stamps[0]]
         self.assertTrue(first_status.global_search, "the first scan ran no search around the wrong start")
-        self.assertTrue(
-            first_status.match_accepted, f"the start search refused: {first_status.global_search_reason}"
-        )
+        self.assertTrue(first_status.match_accepted, f"the start search refused: {first_status.global_search_reason}")
         self.assertIn(stamps[0], track.poses, "the first scan's pose was not published")
         self.assertLess(self.error(stamps[0], track.poses[stamps[0]]), 0.05, "the first pose is off")
         self.assert_never_stale(track)
