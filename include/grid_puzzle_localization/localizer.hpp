@@ -203,7 +203,8 @@ class Localizer {
   /// The x y z extent of the current target's Gaussians (voxel means); empty without a map.
   std::optional<Eigen::AlignedBox3d> mapBounds() const;
   /// Whether the map held reaches around the square of half side `half` [m] about `centre` (x y, map frame):
-  /// always with a whole map (nothing lies outside it), with a window of tiles when its extent holds the square.
+  /// always with a whole map (nothing lies outside it); with a window of tiles when the provider's window holds the
+  /// square (where it has no tile the map has no point), or without that window when the tiles' extent holds it.
   bool mapHolds(const Eigen::Vector3d& centre, double half) const;
   /// The pose of the last accepted match, if any since the last reset.
   std::optional<Eigen::Isometry3d> lastAcceptedPose() const;

@@ -8,11 +8,13 @@
 #include <deque>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <unordered_map>
 #include <vector>
 
+#include "grid_puzzle_localization/map_extent.hpp"
 #include "grid_puzzle_localization/map_store/map_store.hpp"
 #include "grid_puzzle_localization/point_cloud.hpp"
 #include "grid_puzzle_localization/tile_cache.hpp"
@@ -35,6 +37,8 @@ struct TileFileChange {
   std::vector<std::string> added;     ///< tiles entering; an id already loaded is read again
   std::vector<std::string> removed;   ///< tiles leaving; unknown ids are ignored
   std::vector<std::string> prefetch;  ///< tiles likely to enter next: read into the cache while idle
+  /// The provider's window after this change, tiles or none: where the window has no tile the map has no point.
+  std::optional<MapExtent> window;
 };
 
 /// A change of the map, as the map sources produce it. Tiles are named by their file stem "cx_cy" (tile
@@ -86,6 +90,7 @@ struct MapUpdateStats {
   std::string map_store_error;        ///< its last failure, naming the URL; "" if none
   std::size_t map_store_fetched = 0;  ///< tiles downloaded (the rest came from its disk cache)
   std::uint64_t map_store_bytes = 0;  ///< tile bytes downloaded
+  std::optional<MapExtent> window;    ///< the provider's window of the tiles loaded, when their change gave it
 };
 
 class MapUpdateWorker {
@@ -172,8 +177,9 @@ class MapUpdateWorker {
     TargetId id = 0;  // in the target when the voxels are not tile-aligned
   };
   std::unordered_map<std::string, LoadedTile> tiles_;
-  double tile_size_ = 0.0;  // side of the loaded tiles [m]
-  bool aligned_ = false;    // tile-aligned voxels for tile_size_
+  double tile_size_ = 0.0;           // side of the loaded tiles [m]
+  std::optional<MapExtent> window_;  // worker thread only: of the last tile change
+  bool aligned_ = false;             // tile-aligned voxels for tile_size_
   TargetId next_id_ = 0;
   std::string tile_dir_, index_revision_;  // source of the loaded tiles (by reference)
   std::vector<std::string> prefetch_;      // ids still to read ahead

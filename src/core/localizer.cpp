@@ -102,7 +102,11 @@ void Localizer::reset() {
 }
 
 bool Localizer::mapHolds(const Eigen::Vector3d& centre, double half) const {
-  if (worker_.stats().tiles == 0) return true;
+  const MapUpdateStats stats = worker_.stats();
+  if (stats.tiles == 0) return true;
+  if (const std::optional<MapExtent>& w = stats.window)  // the provider's window: off the map where it has no tile
+    return w->x_min <= centre.x() - half && w->x_max >= centre.x() + half && w->y_min <= centre.y() - half &&
+           w->y_max >= centre.y() + half;
   const std::optional<Eigen::AlignedBox3d> box = mapBounds();
   // Voxel means lie up to a voxel inside the area the tiles cover.
   const double reach = half - config_.ndt.resolution;

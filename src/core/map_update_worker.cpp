@@ -183,6 +183,7 @@ bool isDirectory(const std::string& path) {
 }  // namespace
 
 void MapUpdateWorker::apply(NdtTarget& target, const MapChange& change, std::vector<std::string>& failures) {
+  window_ = change.kind == MapChange::Kind::kTileFiles ? change.files.window : std::nullopt;
   switch (change.kind) {
     case MapChange::Kind::kFullCloud:
       target.setTarget(change.cloud);
@@ -502,6 +503,7 @@ void MapUpdateWorker::run() {
       stats_.update_ms = ms;
       stats_.changes = batch.size();
       stats_.tiles = tiles_.size();
+      stats_.window = window_;
       stats_.tile_aligned = aligned_;
       stats_.voxels = snapshot->gaussianCount();
       stats_.points = snapshot->pointCount();

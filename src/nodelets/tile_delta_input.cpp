@@ -68,9 +68,12 @@ std::optional<MapChange> TileDeltaInput::accept(const TileDelta& msg, const MapU
         msg.revision, msg.tile_dir.c_str(), map.stats().tiles);
     return std::nullopt;
   }
-  if (by_reference)  // the map worker reads the files
-    return MapChange::tileFiles(msg.grid_size, {msg.tile_dir, msg.index_revision, msg.reset != 0, msg.added_ids,
-                                                msg.removed_ids, msg.prefetch_ids});
+  if (by_reference) {  // the map worker reads the files
+    const double s = msg.grid_size;
+    const MapExtent window{msg.i_min * s, (msg.i_max + 1) * s, msg.j_min * s, (msg.j_max + 1) * s};
+    return MapChange::tileFiles(s, {msg.tile_dir, msg.index_revision, msg.reset != 0, msg.added_ids, msg.removed_ids,
+                                    msg.prefetch_ids, window});
+  }
   try {
     std::vector<TileCloud> added(msg.added_ids.size());
     for (std::size_t i = 0; i < added.size(); ++i) added[i] = {msg.added_ids[i], fromMsg(msg.added_clouds[i])};

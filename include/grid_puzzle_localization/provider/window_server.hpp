@@ -6,6 +6,7 @@
 #include <optional>
 #include <utility>
 
+#include "grid_puzzle_localization/map_extent.hpp"
 #include "grid_puzzle_localization/provider/tile_references.hpp"
 #include "grid_puzzle_localization/provider/window.hpp"
 
@@ -18,11 +19,6 @@ struct Served {
   bool first = false;    ///< the first window: sent as a reset
   bool changed = false;  ///< the tile set or the bounds changed: a new delta revision is due
   PoseSample pose;       ///< the pose, or the search region's centre, the window was computed for
-};
-
-/// [m] the box of a directory's tiles (map frame).
-struct MapExtent {
-  double x_min = 0.0, x_max = 0.0, y_min = 0.0, y_max = 0.0;
 };
 
 class WindowServer {
