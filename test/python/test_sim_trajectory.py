@@ -1,18 +1,23 @@
 """Trajectories (full scale, no ray casting) and the IMU model derived from them."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from grid_puzzle_localization.sim import worlds
+from grid_puzzle_localization.sim import trajectory, worlds
 from grid_puzzle_localization.sim.imu import GRAVITY, ImuNoise, simulate_imu, true_motion
+from grid_puzzle_localization.sim.movers import CAR
 from grid_puzzle_localization.sim.scenario import _rng
 from grid_puzzle_localization.sim.trajectory import (
     PROFILES,
     RATE,
     Trajectory,
     localization_trajectory,
+    make_trajectory,
     mapping_trajectory,
+    plan_route,
     transform,
 )
 
@@ -74,6 +79,23 @@ def test_duration_truncates_exactly():
     traj = localization_trajectory(world, 0.25, _rng(3, 1)).truncated(12.5)
     assert traj.duration == pytest.approx(12.5)
     assert len(traj.position) == 12.5 * RATE + 1
+
+
+def test_a_route_cut_just_past_a_stop_still_ends_in_time():
+    """A stop before a corner that falls on the sample before the cut end (as a short `--duration` cuts a mover's
+    route) must not stall the car there: the drive takes about length / average speed, not forever."""
+    world = worlds.make_world("urban", 0, 1.0)
+    rng = _rng(0, 7)
+    route = plan_route(world.graph, 500.0, rng)
+    always_stop = replace(CAR, stop_prob=1.0)
+    lane = trajectory._offset_polyline(world.graph.nodes[np.asarray(route)], CAR.lane_offset)
+    corner_s = trajectory._rounded_curve(lane, CAR.corner_radius)[3]
+    stop_at = corner_s[corner_s > 100.0][0] - CAR.stop_backoff
+    step = CAR.speed_step
+    length = np.ceil(stop_at / step) * step + 0.5 * step  # the stop lands on the second-to-last speed sample
+    traj = make_trajectory(world.graph, world.ground, route, always_stop, length, rng)
+    assert traj.length() == pytest.approx(length, rel=0.02)
+    assert traj.duration < 3.0 * length / CAR.speed_avg
 
 
 def test_imu_matches_kinematics_and_noise_model():

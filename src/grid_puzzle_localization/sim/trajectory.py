@@ -282,6 +282,9 @@ def make_trajectory(
     stop_at = corner_s[rng.random(len(corner_s)) < prof.stop_prob] - prof.stop_backoff
     stop_at = stop_at[(stop_at > 0) & (stop_at < total)]
     stops = np.unique(np.searchsorted(s, stop_at))
+    # The route starts and ends at rest: a stop on the sample next to either end would leave no distance to move
+    # between two zero speeds (an endless time). A corner that close to a cut end is no stop.
+    stops = stops[(stops > 1) & (stops < len(s) - 2)]
     dwell = np.zeros(len(s))
     dwell[stops] = rng.uniform(*prof.stop_time, len(stops))
     dwell[0] = REST
