@@ -105,13 +105,13 @@ bool Localizer::mapHolds(const Eigen::Vector3d& centre, double half) const {
   const MapUpdateStats stats = worker_.stats();
   if (stats.tiles == 0) return true;
   if (const std::optional<MapExtent>& w = stats.window)  // the provider's window: off the map where it has no tile
-    return w->x_min <= centre.x() - half && w->x_max >= centre.x() + half && w->y_min <= centre.y() - half &&
-           w->y_max >= centre.y() + half;
+    return w->holdsSquare(centre.x(), centre.y(), half);
   const std::optional<Eigen::AlignedBox3d> box = mapBounds();
+  if (!box) return false;
   // Voxel means lie up to a voxel inside the area the tiles cover.
-  const double reach = half - config_.ndt.resolution;
-  return box && box->min().x() <= centre.x() - reach && box->max().x() >= centre.x() + reach &&
-         box->min().y() <= centre.y() - reach && box->max().y() >= centre.y() + reach;
+  const double r = config_.ndt.resolution;
+  const MapExtent covered{box->min().x() - r, box->max().x() + r, box->min().y() - r, box->max().y() + r};
+  return covered.holdsSquare(centre.x(), centre.y(), half);
 }
 
 std::optional<Eigen::AlignedBox3d> Localizer::mapBounds() const {
