@@ -20,7 +20,9 @@
 // INPUT.bin (little endian) is written by bench/bench_localizer.py:
 //   char[8] "GPLBENCH"; f64 rate_hz; u64 n_map; f32 map[n_map][3]; f64 base_T_sensor[16] (row-major);
 //   u64 n_imu; f64 imu[n_imu][4] (stamp, gyro x y z in base_link [rad/s]);
-//   u64 n_scans; then per scan: f64 stamp; f64 truth[16] (map_T_base, row-major); u64 n; f32 points[n][3]
+//   u64 n_scans; then per scan: f64 stamp; f64 truth[16] (map_T_base, row-major); u64 n; f32 points[n][3];
+//   u64 n_times (0 for an instantaneous scan, else n); f32 times[n_times] (capture time after the stamp [s], which
+//   the localizer deskews with, as the nodelet does with the cloud's time field)
 // Scans are read one at a time between scan slots (outside the timed call), so peak RSS is the localizer's
 // and the map's, not the whole recording's. Gyro samples up to a scan's stamp are fed before it, as the
 // nodelet's IMU callback would.
@@ -51,6 +53,7 @@ struct Scan {
   double stamp = 0.0;
   Eigen::Isometry3d truth = Eigen::Isometry3d::Identity();
   gpl::PointCloud points;
+  gpl::PointTimes times;  ///< empty, or one per point
 };
 
 struct GyroSample {
@@ -114,6 +117,12 @@ Scan readScan(std::ifstream& in) {
   s.stamp = readValue<double>(in);
   s.truth = readPose(in);
   s.points = readCloud(in);
+  const auto n_times = readValue<std::uint64_t>(in);
+  if (n_times != 0 && n_times != s.points.size())
+    throw std::runtime_error("a scan's point times are neither none nor one per point");
+  s.times.resize(n_times);
+  in.read(reinterpret_cast<char*>(s.times.data()), static_cast<std::streamsize>(s.times.size() * sizeof(float)));
+  if (!in) throw std::runtime_error("input file is truncated");
   return s;
 }
 
@@ -191,8 +200,8 @@ int repeatFirstScan(gpl::Localizer& loc, const Input& input, const Scan& scan) {
     std::this_thread::sleep_until(next);
     next += scanPeriod(input);
     const double cpu_start = threadCpuMs();
-    const gpl::LocalizerOutput out =
-        loc.processScan(scan.stamp + static_cast<double>(i) / input.rate_hz, scan.points, input.base_T_sensor);
+    const gpl::LocalizerOutput out = loc.processScan(scan.stamp + static_cast<double>(i) / input.rate_hz, scan.points,
+                                                     input.base_T_sensor, &scan.times);
     cpu.push_back(threadCpuMs() - cpu_start);
     latency.push_back(out.scan_ms);
     iterations = out.ndt.iterations;
@@ -285,24 +294,26 @@ int main(int argc, char** argv) {
       gpl::PointCloud merged;
       for (const TileKey& k : want) merged.insert(merged.end(), tiles.at(k).begin(), tiles.at(k).end());
       loc.map().submit(gpl::MapChange::fullCloud(std::move(merged)));
-    } else if (!tile_source.empty()) {
-      gpl::TileFileChange files;
-      files.dir = tile_source;
-      files.index_revision = index_revision;
-      files.reset = loaded.empty();
-      for (const TileKey& k : want)
-        if (!loaded.count(k)) files.added.push_back(tileId(k, tile_size));
-      for (const TileKey& k : loaded)
-        if (!want.count(k)) files.removed.push_back(tileId(k, tile_size));
-      loc.map().submit(gpl::MapChange::tileFiles(tile_size, std::move(files)));
     } else {
-      std::vector<gpl::TileCloud> added;
-      std::vector<std::string> removed;
+      std::vector<TileKey> entering;
+      std::vector<std::string> leaving;
       for (const TileKey& k : want)
-        if (!loaded.count(k)) added.push_back({tileId(k, tile_size), tiles.at(k)});
+        if (!loaded.count(k)) entering.push_back(k);
       for (const TileKey& k : loaded)
-        if (!want.count(k)) removed.push_back(tileId(k, tile_size));
-      loc.map().submit(gpl::MapChange::tiles(loaded.empty(), tile_size, std::move(added), std::move(removed)));
+        if (!want.count(k)) leaving.push_back(tileId(k, tile_size));
+      if (!tile_source.empty()) {  // by reference, as the provider sends them
+        gpl::TileFileChange files;
+        files.dir = tile_source;
+        files.index_revision = index_revision;
+        files.reset = loaded.empty();
+        for (const TileKey& k : entering) files.added.push_back(tileId(k, tile_size));
+        files.removed = std::move(leaving);
+        loc.map().submit(gpl::MapChange::tileFiles(tile_size, std::move(files)));
+      } else {
+        std::vector<gpl::TileCloud> added;
+        for (const TileKey& k : entering) added.push_back({tileId(k, tile_size), tiles.at(k)});
+        loc.map().submit(gpl::MapChange::tiles(loaded.empty(), tile_size, std::move(added), std::move(leaving)));
+      }
     }
     loaded = want;
     ++updates;
@@ -350,7 +361,7 @@ int main(int argc, char** argv) {
       next += scanPeriod(input);
     }
     const double cpu_start = threadCpuMs();
-    const gpl::LocalizerOutput out = loc.processScan(scan.stamp, scan.points, input.base_T_sensor);
+    const gpl::LocalizerOutput out = loc.processScan(scan.stamp, scan.points, input.base_T_sensor, &scan.times);
     const double cpu_ms = threadCpuMs() - cpu_start;
     // The first scan swaps in the initial map and converges from the initial pose: reported on its own.
     if (i == 0) {

@@ -45,6 +45,7 @@ def write_input(path: Path, drive: ss.Drive, imu_rate: float, seed: int) -> None
             points = ss.scan(scene, pose, rng)
             f.write(np.float64(t).tobytes() + pose.astype(np.float64).tobytes())
             f.write(np.uint64(len(points)).tobytes() + points.tobytes())
+            f.write(np.uint64(0).tobytes())  # instantaneous scans: no point times
 
 
 def main() -> int:

@@ -1,8 +1,9 @@
 // make bench-map-store: the map store fetching a window of tiles from a real nginx on localhost
-// (test/cpp/nginx_server.hpp), as the map worker does (batches of 32): cold (every tile downloaded, checked and
-// stored), warm (every tile from the disk cache, checked again) and an index poll answered 304. One JSON line per
-// configuration (tile size, connections). Localhost has no network latency: the figures are the client's own cost
-// (HTTP, SHA-256, disk cache), the floor of what a remote server adds to. Medians of 3 runs, each on a fresh cache.
+// (test/cpp/nginx_server.hpp), as the map worker does (batches of kTileFetchBatch): cold (every tile downloaded,
+// checked and stored), warm (every tile from the disk cache, checked again) and an index poll answered 304. One JSON
+// line per configuration (tile size, connections). Localhost has no network latency: the figures are the client's own
+// cost (HTTP, SHA-256, disk cache), the floor of what a remote server adds to. Medians of 3 runs, each on a fresh
+// cache.
 // --quick: tiny, one run, for `make test`.
 #include <sys/stat.h>
 
@@ -62,8 +63,8 @@ std::vector<std::string> writeMap(const std::string& root, int count, std::size_
 
 double fetchAll(gpl::MapStore& store, const std::vector<std::string>& ids) {
   const auto start = Clock::now();
-  for (std::size_t k = 0; k < ids.size(); k += 32) {
-    const std::vector<std::string> batch(ids.begin() + k, ids.begin() + std::min(ids.size(), k + 32));
+  for (std::size_t k = 0; k < ids.size(); k += gpl::kTileFetchBatch) {
+    const std::vector<std::string> batch(ids.begin() + k, ids.begin() + std::min(ids.size(), k + gpl::kTileFetchBatch));
     for (const gpl::FetchedTile& t : store.fetch(batch))
       if (t.path.empty()) throw std::runtime_error(t.error);
   }
@@ -98,7 +99,7 @@ int main(int argc, char** argv) {
     const std::vector<std::string> ids = writeMap(root, count, bytes);
     gpl_test::NginxServer server(root);
     server.start();
-    for (const int connections : {1, 4}) {
+    for (const int connections : {1, gpl::MapStoreConfig().max_connections}) {  // one, and the default
       std::vector<double> colds, warms, polls_ms;
       gpl::MapStoreStatus s;
       for (int run = 0; run < (quick ? 1 : 3); ++run) {

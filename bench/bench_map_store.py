@@ -2,20 +2,20 @@
 
 1. Fetch throughput without any delay: bench_map_store (C++) fetches a window of tiles cold, warm and polls the
    index; its JSON lines are passed through.
-2. A drive through the core localizer with its tiles fetched over HTTP: bench-localizer's synthetic drive (a 60 s
-   street at 5 m/s, 10 Hz scans, a 7 x 7 window of 10 m tiles following the pose), the map cut by `gpm tile`,
-   nginx behind a delaying proxy (bench/delay_proxy.py: 25 ms each way, so a 50 ms round trip, and 10 MB/s).
-   bench_localizer runs it in real time, in tiles mode with the tiles named by reference, as the provider sends
-   them:
+2. A drive through the core localizer with its tiles fetched over HTTP: the first URBAN_SECONDS of the paper's urban
+   route (`gpm simulate urban`, HDL-32E at 10 Hz), its prior map cut by `gpm tile` into the urban preset's 2 m tiles
+   and a (2n+1)^2 window of them (n = 25) following the pose; nginx serves them behind a delaying proxy
+   (bench/delay_proxy.py: 25 ms each way, so a 50 ms round trip, and 10 MB/s). bench_localizer runs it in real
+   time, in tiles mode with the tiles named by reference, as the provider sends them:
    - `disk`: from the tile directory (the reference run);
    - `store_cold`: from the URL with an empty disk cache;
    - `store_warm`: again, on the cache the cold run left;
-   - `store_outage`: an empty cache, nginx stopped OUTAGE_S into the drive for OUTAGE_LENGTH_S and started again;
+   - `store_outage`: an empty cache, nginx stopped a third into the drive for OUTAGE_LENGTH_S and started again;
    and `repeat`, bench-localizer's control (the same scan at every slot: the machine's own latency spread).
    Each run prints bench_localizer's JSON line plus: the between-runs RMSE of its poses against the disk run's,
    bytes fetched per km driven, and for the outage the scans matched while the server was down and the time from
    its return until the store answered again.
---quick: a 10 s drive with a 2 s outage (checks that it runs).
+--quick: bench-localizer's synthetic street instead, 10 s with a 2 s outage (checks that it runs).
 """
 
 from __future__ import annotations
@@ -26,13 +26,16 @@ import hashlib
 import json
 import os
 import subprocess
+import sys
 import tempfile
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
+import bench_localizer
 import numpy as np
-from bench_localizer import write_input
+import replay_scenario
 from delay_proxy import DelayProxy
 from fixtures import nginx_server
 from fixtures import synthetic_scene as ss
@@ -40,20 +43,65 @@ from hardware import cpu_model
 
 from grid_puzzle_localization.pcd import write_pcd
 from grid_puzzle_localization.pcd.reader import XYZ_DTYPE
+from grid_puzzle_localization.provider.window import PRESETS
 from grid_puzzle_localization.tiling import TileConfig, tile_map
 
-TILE_SIZE = 10.0  # [m] as bench-localizer
+ROOT = Path(__file__).resolve().parents[1]
 ONE_WAY_DELAY_S = 0.025
 RATE_BYTES_S = 10e6
+URBAN_SECONDS = 180.0  # [s] of the urban route driven (about 0.8 km)
+URBAN_TILE_SIZE = 2.0  # [m] the paper's s
+OUTAGE_LENGTH_S = 10.0
+QUICK_SECONDS, QUICK_OUTAGE_S = 10.0, 2.0
 
 
-def write_tiles(drive_map: np.ndarray, directory: Path) -> None:
-    records = np.zeros(len(drive_map), dtype=XYZ_DTYPE)
+@dataclass(frozen=True)
+class Drive:
+    """A drive for bench_localizer: its input file, and the directory nginx serves (the tiles at map/)."""
+
+    route: str
+    data: Path
+    www: Path
+    seconds: float
+    tile_size: float  # [m]
+    half_window: int  # n: the window is (2n+1)^2 tiles around the pose
+
+
+def cut_tiles(map_pcd: Path, tile_size: float) -> Path:
+    """The tiles of ``map_pcd`` as `gpm tile` writes them, at www/map beside it; returns www (what nginx serves)."""
+    www = map_pcd.parent / "www"
+    www.mkdir()
+    tile_map([map_pcd], www / "map", TileConfig(grid_size=tile_size, progress=False))
+    return www
+
+
+def urban_drive(tmp: Path) -> Drive:
+    """The first URBAN_SECONDS of the urban route, simulated afresh (deterministic by seed)."""
+    scenario = tmp / "urban"
+    gpm = [sys.executable, str(ROOT / "scripts/gpm")]
+    subprocess.run(
+        [*gpm, "simulate", "urban", "--duration", str(URBAN_SECONDS), "-o", str(scenario), "--quiet"],
+        check=True,
+        stdout=subprocess.DEVNULL,
+    )
+    data = tmp / "drive.bin"
+    replay_scenario.write_input(scenario, data)
+    www = cut_tiles(scenario / "global_map.pcd", URBAN_TILE_SIZE)
+    return Drive("urban", data, www, URBAN_SECONDS, URBAN_TILE_SIZE, PRESETS["urban"][0])
+
+
+def street_drive(tmp: Path) -> Drive:
+    """bench-localizer's synthetic street, QUICK_SECONDS long, in its 7 x 7 window of 10 m tiles."""
+    drive = ss.Drive(duration=QUICK_SECONDS)
+    data = tmp / "drive.bin"
+    bench_localizer.write_input(data, drive, imu_rate=100.0, seed=1)
+    street = ss.sample_map(ss.make_scene(length=drive.x0 + drive.speed * drive.duration + 40.0)).astype(np.float32)
+    records = np.zeros(len(street), dtype=XYZ_DTYPE)
     for axis, name in enumerate("xyz"):
-        records[name] = drive_map[:, axis]
-    write_pcd(directory / "map.pcd", records)
-    (directory / "www").mkdir()
-    tile_map([directory / "map.pcd"], directory / "www" / "map", TileConfig(grid_size=TILE_SIZE, progress=False))
+        records[name] = street[:, axis]
+    (tmp / "street").mkdir()
+    write_pcd(tmp / "street/map.pcd", records)
+    return Drive("street", data, cut_tiles(tmp / "street/map.pcd", 10.0), QUICK_SECONDS, 10.0, 3)
 
 
 def read_trace(path: Path) -> dict[str, np.ndarray]:
@@ -84,13 +132,12 @@ def outage_figures(trace: dict, down_at: float, up_at: float) -> dict:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="a 10 s drive with a 2 s outage")
+    parser.add_argument("--quick", action="store_true", help="the synthetic street, 10 s, with a 2 s outage")
     workspace = Path(os.environ["GPL_WS"])  # exported by tools/env.sh (the Makefile sources it)
     bin_dir = workspace / "devel/lib/grid_puzzle_localization"
     args = parser.parse_args()
     if nginx_server.binary() is None:
         raise SystemExit("bench-map-store needs nginx (apt-get install nginx-light; `make setup` installs it)")
-    duration, outage_at, outage_length = (10.0, 3.0, 2.0) if args.quick else (60.0, 20.0, 10.0)
     hardware = {"cpu_model": cpu_model(), "cores": os.cpu_count(), "load_average_1min": os.getloadavg()[0]}
 
     throughput = subprocess.run(
@@ -103,25 +150,24 @@ def main() -> int:
 
     with tempfile.TemporaryDirectory() as tmp_name:
         tmp = Path(tmp_name)
-        data = tmp / "drive.bin"
-        drive = ss.Drive(duration=duration)
-        write_input(data, drive, imu_rate=100.0, seed=1)
-        scene = ss.make_scene(length=drive.x0 + drive.speed * drive.duration + 40.0)
-        write_tiles(ss.sample_map(scene).astype(np.float32), tmp)
-        server = nginx_server.NginxServer(tmp / "www")
+        drive = street_drive(tmp) if args.quick else urban_drive(tmp)
+        outage_length = QUICK_OUTAGE_S if args.quick else OUTAGE_LENGTH_S
+        outage_at = drive.seconds / 3
+        server = nginx_server.NginxServer(drive.www)
         server.start()
         proxy = DelayProxy(server.port, ONE_WAY_DELAY_S, RATE_BYTES_S)
         proxy.start()
         url = f"http://127.0.0.1:{proxy.port}/map"
         # as the provider names the index it serves (docs/map_store.md)
-        revision = "sha256:" + hashlib.sha256((tmp / "www/map/index.json").read_bytes()).hexdigest()[:16]
+        revision = "sha256:" + hashlib.sha256((drive.www / "map/index.json").read_bytes()).hexdigest()[:16]
         link = {"one_way_delay_ms": ONE_WAY_DELAY_S * 1e3, "rate_mb_s": RATE_BYTES_S / 1e6}
         try:
 
             def run(name: str, source: str | None, cache: Path | None = None) -> tuple[dict, dict | None]:
                 mode = "repeat" if source is None else "tiles"
                 trace = tmp / f"{name}.csv"
-                cmd = [str(bin_dir / "bench_localizer"), str(data), mode, "--tile-size", str(TILE_SIZE)]
+                cmd = [str(bin_dir / "bench_localizer"), str(drive.data), mode, "--tile-size", str(drive.tile_size)]
+                cmd += ["--window", str(drive.half_window)]
                 if source is not None:
                     cmd += ["--tile-source", source, "--index-revision", revision, "--trace", str(trace)]
                 if cache is not None:
@@ -139,7 +185,7 @@ def main() -> int:
 
             control, _ = run("repeat", None)
             report(control, None, None)
-            disk_row, disk = run("disk", str(tmp / "www" / "map"))
+            disk_row, disk = run("disk", str(drive.www / "map"))
             report(disk_row, disk, disk)
             cold_row, cold = run("store_cold", url, tmp / "cache")
             report(cold_row, cold, disk, link=link)

@@ -1,6 +1,7 @@
 """A TCP proxy that makes localhost look like a network link: every chunk is delivered a fixed delay after it
-arrived (each way, so a round trip costs twice that) and each direction of a connection is held to a byte rate.
-For `make bench-map-store-drive`, in front of nginx; asyncio, one thread, no third-party code.
+arrived (each way, so a round trip costs twice that) and each direction of the link, all connections together, is
+held to a byte rate.
+For `make bench-map-store`'s drive, in front of nginx; asyncio, one thread, no third-party code.
 
     proxy = DelayProxy(upstream_port, one_way_delay_s=0.025, rate_bytes_s=10e6)
     proxy.start()  # serves on proxy.port until proxy.stop()
@@ -25,6 +26,7 @@ class DelayProxy:
         self._loop = asyncio.new_event_loop()
         self._thread = threading.Thread(target=self._loop.run_forever, name="delay_proxy", daemon=True)
         self._server: asyncio.base_events.Server | None = None
+        self._link_free_at = {"up": 0.0, "down": 0.0}  # when each direction has sent what it was given (monotonic)
 
     def start(self) -> None:
         self._thread.start()
@@ -43,21 +45,22 @@ class DelayProxy:
         except OSError:
             client_writer.close()  # the server is down: the client sees the connection closed
             return
-        requests = self._pipe(client_reader, upstream_writer)
-        answers = self._pipe(upstream_reader, client_writer)
+        requests = self._pipe(client_reader, upstream_writer, "up")
+        answers = self._pipe(upstream_reader, client_writer, "down")
         await asyncio.gather(requests, answers, return_exceptions=True)
 
-    async def _pipe(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        """Copies reader to writer: each chunk leaves `delay` after it came, and no sooner than the rate allows."""
+    async def _pipe(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, direction: str) -> None:
+        """Copies reader to writer: each chunk leaves `delay` after it came, and no sooner than the rate of the
+        link's `direction` allows (shared by every connection: one event loop thread, so no lock)."""
         queue: asyncio.Queue = asyncio.Queue()
 
         async def deliver() -> None:
-            free_at = 0.0  # when the link has sent what it was given
             while True:
                 arrived, chunk = await queue.get()
                 if chunk is None:
                     break
-                free_at = max(free_at, arrived) + len(chunk) / self.rate
+                free_at = max(self._link_free_at[direction], arrived) + len(chunk) / self.rate
+                self._link_free_at[direction] = free_at
                 wait = max(free_at, arrived + self.delay) - time.monotonic()
                 if wait > 0:
                     await asyncio.sleep(wait)

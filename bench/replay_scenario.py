@@ -48,8 +48,10 @@ def write_input(scenario: Path, out: Path) -> int:
                 w = msg.angular_velocity
                 gyro.append([msg.header.stamp.to_sec(), w.x, w.y, w.z])
             elif topic == points_topic:
-                scans.append((msg.header.stamp.to_sec(), xyz_array(cloud_to_array(msg)).astype(np.float32)))
-    stamps = np.array([s for s, _ in scans])
+                records = cloud_to_array(msg)
+                times = records["time"] if "time" in (records.dtype.names or ()) else np.zeros(0)
+                scans.append((msg.header.stamp.to_sec(), xyz_array(records).astype(np.float32), times))
+    stamps = np.array([scan[0] for scan in scans])
     truth, inside = reference.interpolate(stamps)
     if not inside.all():
         raise SystemExit(f"{scenario}: {int((~inside).sum())} scans lie outside the reference poses' time span")
@@ -59,9 +61,10 @@ def write_input(scenario: Path, out: Path) -> int:
         f.write(mount.astype(np.float64).tobytes())
         f.write(np.uint64(len(gyro)).tobytes() + np.asarray(gyro, dtype=np.float64).reshape(-1, 4).tobytes())
         f.write(np.uint64(len(scans)).tobytes())
-        for i, (stamp, points) in enumerate(scans):
+        for i, (stamp, points, times) in enumerate(scans):
             f.write(np.float64(stamp).tobytes() + truth[i].astype(np.float64).tobytes())
             f.write(np.uint64(len(points)).tobytes() + np.ascontiguousarray(points).tobytes())
+            f.write(np.uint64(len(times)).tobytes() + np.ascontiguousarray(times, dtype=np.float32).tobytes())
     return len(scans)
 
 

@@ -157,7 +157,8 @@ class MapUpdateWorker {
   // The map store of `url` at `revision` (opened, or its index polled, as needed); throws std::invalid_argument
   // when it cannot be opened or the server's index is of another revision.
   MapStore& storeAt(const std::string& url, const std::string& revision);
-  void readAhead();  // prefetch while nothing is queued
+  void readAhead();        // prefetch while nothing is queued
+  void copyStoreStatus();  // the map store's status into stats_; mutex_ held
 
   mutable std::mutex mutex_;  // guards everything below up to worker_
   std::condition_variable wake_;

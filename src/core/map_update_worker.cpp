@@ -168,7 +168,6 @@ void timed(double& wall_ms, double& cpu_ms, Work&& work) {
 }
 
 constexpr std::size_t kFoldBatchPoints = 1 << 21;  // ~2 M points read per fold, their voxels waiting meanwhile
-constexpr std::size_t kFetchBatch = 32;            // tiles fetched from a map store at once (concurrently), then read
 
 std::string withoutTrailingSlash(std::string url) {
   while (url.size() > 1 && url.back() == '/') url.pop_back();
@@ -281,6 +280,15 @@ PointCloud MapUpdateWorker::readTile(const std::string& path) {
   return points;
 }
 
+void MapUpdateWorker::copyStoreStatus() {
+  if (!store_) return;
+  const MapStoreStatus store = store_->status();
+  stats_.map_store_reachable = store.reachable;
+  stats_.map_store_error = store.reachable ? "" : "map store " + store.url + " unreachable: " + store.last_error;
+  stats_.map_store_fetched = store.tiles_fetched;
+  stats_.map_store_bytes = store.bytes_fetched;
+}
+
 MapStore& MapUpdateWorker::storeAt(const std::string& url, const std::string& revision) {
   if (!store_ || store_->url() != withoutTrailingSlash(url)) {
     MapStoreConfig config;
@@ -335,23 +343,31 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
   // batch is fetched (a fetched file is kept until the store's next fetch).
   std::unordered_map<std::string, FetchedTile> fetched;
   // Tiles of the window that could not be fetched (server down, a bad copy on it) are asked for again with the
-  // next change of the same source; a reset names the whole window anyway.
+  // next changes of the same source, one fetch batch per change, the latest failures (nearest the vehicle) first:
+  // after an outage the backlog drains over the next changes instead of holding back the first one, and the
+  // target, for seconds. A reset names the whole window anyway.
   std::vector<std::string> added = change.added;
+  std::vector<std::string> deferred;
   if (store && same_source && !change.reset) {
     const std::unordered_set<std::string> leaving(change.removed.begin(), change.removed.end());
-    for (const std::string& id : refetch_)
-      if (!leaving.count(id) && !tiles_.count(id)) added.push_back(id);
+    std::size_t retried = 0;
+    for (auto id = refetch_.rbegin(); id != refetch_.rend(); ++id) {
+      if (leaving.count(*id) || tiles_.count(*id)) continue;
+      (retried++ < kTileFetchBatch ? added : deferred).push_back(*id);
+    }
   }
-  refetch_.clear();
+  refetch_.assign(deferred.rbegin(), deferred.rend());  // oldest first, as they failed
   for (std::size_t k = 0; k < added.size(); ++k) {
     const std::string& id = added[k];
     const std::string path = change.dir + "/" + id + ".pcd";  // the prefetch cache's key (a URL for a map store)
-    if (store && k % kFetchBatch == 0) {
+    if (store && k % kTileFetchBatch == 0) {
       std::vector<std::string> batch;
-      for (std::size_t b = k; b < std::min(k + kFetchBatch, added.size()); ++b)
+      for (std::size_t b = k; b < std::min(k + kTileFetchBatch, added.size()); ++b)
         if (!(aligned_ && cache_.contains(change.dir + "/" + added[b] + ".pcd"))) batch.push_back(added[b]);
       fetched.clear();
       for (FetchedTile& t : store->fetch(batch)) fetched[t.id] = std::move(t);
+      std::lock_guard<std::mutex> lock(mutex_);
+      copyStoreStatus();  // a server that answers again is reported at once, not after the whole change
     }
     try {
       std::optional<TileVoxels> cached = aligned_ ? cache_.take(path) : std::nullopt;
@@ -530,13 +546,7 @@ void MapUpdateWorker::run() {
     stats_.cache_hits = totals_.cache_hits;
     stats_.points_outside = totals_.points_outside;
     stats_.cache_bytes = cache_.bytes();
-    if (store_) {
-      const MapStoreStatus store = store_->status();
-      stats_.map_store_reachable = store.reachable;
-      stats_.map_store_error = store.reachable ? "" : "map store " + store.url + " unreachable: " + store.last_error;
-      stats_.map_store_fetched = store.tiles_fetched;
-      stats_.map_store_bytes = store.bytes_fetched;
-    }
+    copyStoreStatus();
     if (queue_.empty() && retired_.empty()) idle_.notify_all();
   }
 }

@@ -481,6 +481,51 @@ TEST(MapWorkerOverHttp, ATileDirectoryByUrlGivesTheTargetOfTheLocalDirectoryAndR
   std::system(("rm -rf '" + cache + "'").c_str());
 }
 
+TEST(MapWorkerOverHttp, AfterAnOutageEachChangeRetriesOneFetchBatchOfTheFailedTilesTheLatestFirst) {
+  if (NginxServer::binary().empty()) GTEST_SKIP() << "nginx is not installed (apt-get install nginx-light)";
+  ServedWorld world;
+  const std::size_t batch = gpl::kTileFetchBatch, late = 5;  // `late` tiles more than one batch failed
+  ASSERT_GE(world.ids.size(), 10 + batch + late);
+  NginxServer server(world.root);
+  server.start();
+  const std::string cache = makeTempDir();
+  gpl::MapStoreConfig config;
+  config.cache_dir = cache;
+  config.retry_backoff = 0.01;
+  const std::string url = server.url("/map");
+  gpl::MapUpdateWorker worker{gpl::VoxelMapParams()};
+  worker.setMapStoreConfig(config);
+  worker.submit(fileChange(url, world.revision(), true, {world.ids.begin(), world.ids.begin() + 10}));
+  worker.waitIdle();
+  ASSERT_EQ(worker.stats().tiles, 10u);
+
+  // The server goes down while the window moves on: every entering tile fails (in this order).
+  server.stop();
+  const std::vector<std::string> entering(world.ids.begin() + 10, world.ids.begin() + 10 + batch + late);
+  worker.submit(fileChange(url, world.revision(), false, entering));
+  worker.waitIdle();
+  EXPECT_EQ(worker.takeErrors().size(), entering.size());
+  EXPECT_EQ(worker.stats().tiles, 10u);
+
+  // Back: the next change fetches one batch of them, not the whole backlog.
+  server.start();
+  worker.submit(fileChange(url, world.revision(), false, {}));
+  worker.waitIdle();
+  EXPECT_EQ(worker.takeErrors(), std::vector<std::string>());
+  EXPECT_TRUE(worker.stats().map_store_reachable);
+  EXPECT_EQ(worker.stats().tiles, 10 + batch);
+  // The ones left are the earliest failures: they leave the window unloaded (the count stays) and are not fetched.
+  const std::vector<std::string> earliest(entering.begin(), entering.begin() + late);
+  worker.submit(fileChange(url, world.revision(), false, {}, earliest));
+  worker.waitIdle();
+  worker.submit(fileChange(url, world.revision(), false, {}));
+  worker.waitIdle();
+  EXPECT_EQ(worker.takeErrors(), std::vector<std::string>());
+  EXPECT_EQ(worker.stats().tiles, 10 + batch);
+  EXPECT_EQ(worker.stats().map_store_fetched, 10 + batch);
+  std::system(("rm -rf '" + cache + "'").c_str());
+}
+
 // ---- the provider's tile references follow a directory given by URL through its polled index
 
 TEST_F(MapStoreTest, TheProvidersTileReferencesFollowAPolledRevision) {

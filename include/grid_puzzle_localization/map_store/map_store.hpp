@@ -23,7 +23,7 @@ struct MapStoreConfig {
   double transfer_timeout = 30.0;               ///< [s] for one whole request (connection included)
   int max_retries = 3;                          ///< further attempts after a failed one (timeouts, 5xx, bad bytes)
   double retry_backoff = 0.5;                   ///< [s] pause before the first retry, doubled for each next one
-  int max_connections = 4;                      ///< concurrent fetches (and kept-alive connections)
+  int max_connections = 16;                     ///< concurrent fetches (and kept-alive connections)
   std::uint64_t max_tile_bytes = 256ull << 20;  ///< a tile larger than this is refused before it is stored [bytes]
   std::uint64_t max_index_bytes = 1ull << 30;   ///< index.json larger than this is refused [bytes]
   std::string ca_file;                          ///< "" = the system CA store (HTTPS is always verified)
@@ -35,6 +35,10 @@ struct MapStoreConfig {
   /// "" when valid, else what is wrong, naming the field.
   std::string validate() const;
 };
+
+/// Tiles the map worker asks of fetch() at once, then reads before it asks for more: several rounds of
+/// max_connections requests, so a link's round trips overlap.
+constexpr std::size_t kTileFetchBatch = 64;
 
 /// What the store did, and whether its server answers.
 struct MapStoreStatus {

@@ -86,7 +86,7 @@ class MapStoreConfig:
     transfer_timeout: float = 30.0  # [s] one whole request
     max_retries: int = 3  # further attempts after a failed one
     retry_backoff: float = 0.5  # [s] before the first retry, doubled for each next one
-    max_connections: int = 4  # concurrent fetches and kept-alive connections
+    max_connections: int = 16  # concurrent fetches and kept-alive connections
     max_tile_bytes: int = 256 << 20
     max_index_bytes: int = 1 << 30
     ca_file: str = ""  # "" = the system CA store
