@@ -59,7 +59,7 @@ QUICK_SECONDS, QUICK_OUTAGE_S = 10.0, 2.0
 class Drive:
     """A drive for bench_localizer: its input file, and the directory nginx serves (the tiles at map/)."""
 
-    route: str
+    route: str  # "urban" or "street" (--quick): in every JSON line of the drive
     data: Path
     www: Path
     seconds: float
@@ -181,7 +181,7 @@ def main() -> int:
                     row["between_runs_rmse_m"] = round(between_runs_rmse(trace, reference), 5)
                 if row["run"].startswith("store"):
                     row["bytes_fetched_per_km"] = round(row["map_store"]["bytes_fetched"] / (row["distance_m"] / 1e3))
-                print(json.dumps({**row, **extra, **hardware}), flush=True)
+                print(json.dumps({**row, "route": drive.route, **extra, **hardware}), flush=True)
 
             control, _ = run("repeat", None)
             report(control, None, None)
