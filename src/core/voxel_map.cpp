@@ -297,37 +297,52 @@ TileVoxels tileVoxels(const TileKey& key, double tile_size, double resolution, c
   const double inv = 1.0 / resolution;
   TileVoxels out;
   out.key = key;
-  // The voxel index voxelStatistics computes, so the owner test agrees with the voxel a point lands in.
-  std::vector<std::pair<VoxelKey, std::uint32_t>> keyed;  // (voxel, point index)
-  keyed.reserve(points.size());
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    const Eigen::Vector3d p = points[i].cast<double>();
+  // The tile's own voxels: x in [x0, x0 + m), y in [y0, y0 + m) (voxel indices).
+  const std::int64_t x0 = key.i * m, y0 = key.j * m;
+  // Each voxel sums its points as they come, in the order of the cloud (a from-scratch build's order); then the few
+  // voxels are put in key order. An open-addressing table from voxel to its entry: sorting the points by voxel costs
+  // several times more.
+  std::vector<std::int32_t> table(64, -1);  // entry index into out.voxels, -1 = empty; size a power of two
+  const auto slotOf = [&table, &out](const VoxelKey& k) -> std::int32_t& {
+    const std::size_t mask = table.size() - 1;
+    for (std::size_t s = VoxelMap::hash(k) & mask;; s = (s + 1) & mask)
+      if (table[s] < 0 || out.voxels[table[s]].first == k) return table[s];
+  };
+  std::int32_t last = -1;  // entry of the previous point (neighbouring points share voxels)
+  for (const Eigen::Vector3f& point : points) {
+    const Eigen::Vector3d p = point.cast<double>();
     if (!p.allFinite()) continue;
+    // The voxel index voxelStatistics computes, so the owner test agrees with the voxel a point lands in.
     const VoxelKey k{static_cast<std::int32_t>(std::floor(p.x() * inv)),
                      static_cast<std::int32_t>(std::floor(p.y() * inv)),
                      static_cast<std::int32_t>(std::floor(p.z() * inv))};
-    if (floorDiv(k.x, m) == key.i && floorDiv(k.y, m) == key.j)
-      keyed.emplace_back(k, static_cast<std::uint32_t>(i));
-    else
+    if (k.x < x0 || k.x >= x0 + m || k.y < y0 || k.y >= y0 + m) {
       ++out.outside;
+      continue;
+    }
+    if (last < 0 || !(out.voxels[last].first == k)) {
+      std::int32_t& slot = slotOf(k);
+      if (slot >= 0) {
+        last = slot;
+      } else {
+        last = slot = static_cast<std::int32_t>(out.voxels.size());
+        out.voxels.emplace_back(k, VoxelStats());
+        if (2 * out.voxels.size() > table.size()) {  // keep the load at most one half
+          table.assign(2 * table.size(), -1);
+          for (std::size_t e = 0; e < out.voxels.size(); ++e)
+            slotOf(out.voxels[e].first) = static_cast<std::int32_t>(e);
+        }
+      }
+    }
+    out.voxels[last].second.add(p - Eigen::Vector3d(k.x * resolution, k.y * resolution, k.z * resolution));
   }
-  // By voxel, then by point index: each voxel's points are summed in the order of the cloud.
-  std::sort(keyed.begin(), keyed.end(), [](const auto& a, const auto& b) {
+  std::sort(out.voxels.begin(), out.voxels.end(), [](const auto& a, const auto& b) {
     const VoxelKey &u = a.first, &v = b.first;
     if (u.x != v.x) return u.x < v.x;
     if (u.y != v.y) return u.y < v.y;
-    if (u.z != v.z) return u.z < v.z;
-    return a.second < b.second;
+    return u.z < v.z;
   });
-  std::size_t voxels = 0;
-  for (std::size_t i = 0; i < keyed.size(); ++i) voxels += i == 0 || !(keyed[i].first == keyed[i - 1].first);
-  out.voxels.reserve(voxels);
-  for (std::size_t i = 0; i < keyed.size(); ++i) {
-    const VoxelKey& k = keyed[i].first;
-    if (i == 0 || !(k == keyed[i - 1].first)) out.voxels.emplace_back(k, VoxelStats());
-    const Eigen::Vector3d corner(k.x * resolution, k.y * resolution, k.z * resolution);
-    out.voxels.back().second.add(points[keyed[i].second].cast<double>() - corner);
-  }
+  out.voxels.shrink_to_fit();
   return out;
 }
 

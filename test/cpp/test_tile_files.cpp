@@ -170,9 +170,10 @@ TEST(NdtTarget, AddTileDropsPointsWhoseVoxelLiesInAnotherTile) {
 }
 
 TEST(TileVoxels, EqualTheStatisticsOfAFromScratchBuildOfTheTilesOwnPoints) {
-  // Tile (1, -2) of side 2 m covers [2, 4) x [-4, -2); the points spill 0.5 m over each border and one is NaN.
+  // Tile (1, -2) of side 2 m covers [2, 4) x [-4, -2); the points spill 0.5 m over each border and one is NaN. They
+  // span 40 m in height: 160 voxels, more than the first voxel table of tileVoxels holds.
   std::mt19937 rng(7);
-  std::uniform_real_distribution<float> x(1.5f, 4.5f), y(-4.5f, -1.5f), z(-3.0f, 3.0f);
+  std::uniform_real_distribution<float> x(1.5f, 4.5f), y(-4.5f, -1.5f), z(-20.0f, 20.0f);
   gpl::PointCloud points, own;
   for (int i = 0; i < 3000; ++i) {
     const gpl::Point p(x(rng), y(rng), z(rng));
