@@ -15,6 +15,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from bench_input import write_header, write_scan, write_scan_count
 from fixtures import synthetic_scene as ss
 from hardware import cpu_model
 
@@ -31,21 +32,13 @@ def write_input(path: Path, drive: ss.Drive, imu_rate: float, seed: int) -> None
     scene = ss.make_scene(length=drive.x0 + drive.speed * drive.duration + 40.0)
     rng = np.random.default_rng(seed)
     with path.open("wb") as f:
-        f.write(b"GPLBENCH")
-        f.write(np.float64(drive.rate).tobytes())
-        cloud = ss.sample_map(scene)
-        f.write(np.uint64(len(cloud)).tobytes() + cloud.tobytes())
-        f.write(ss.lidar_mount().astype(np.float64).tobytes())
         imu_t = np.arange(0.0, drive.duration, 1.0 / imu_rate) if imu_rate > 0 else np.zeros(0)
         gyro = drive.angular_velocity(imu_t) + rng.normal(0.0, GYRO_NOISE, size=(imu_t.size, 3))
-        f.write(np.uint64(imu_t.size).tobytes() + np.column_stack([imu_t, gyro]).astype(np.float64).tobytes())
-        f.write(np.uint64(len(drive.stamps)).tobytes())
+        write_header(f, drive.rate, ss.sample_map(scene), ss.lidar_mount(), np.column_stack([imu_t, gyro]))
+        write_scan_count(f, len(drive.stamps))
         for t in drive.stamps:
             pose = drive.pose(float(t))
-            points = ss.scan(scene, pose, rng)
-            f.write(np.float64(t).tobytes() + pose.astype(np.float64).tobytes())
-            f.write(np.uint64(len(points)).tobytes() + points.tobytes())
-            f.write(np.uint64(0).tobytes())  # instantaneous scans: no point times
+            write_scan(f, float(t), pose, ss.scan(scene, pose, rng), np.zeros(0))  # instantaneous scans
 
 
 def main() -> int:

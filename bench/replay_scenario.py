@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import rosbag
+from bench_input import write_header, write_scan, write_scan_count
 
 from grid_puzzle_localization.blocks.poses import pose_matrix, read_tum
 from grid_puzzle_localization.experiment.scenario import read_scenario
@@ -56,15 +57,10 @@ def write_input(scenario: Path, out: Path) -> int:
     if not inside.all():
         raise SystemExit(f"{scenario}: {int((~inside).sum())} scans lie outside the reference poses' time span")
     with out.open("wb") as f:
-        f.write(b"GPLBENCH" + np.float64(10.0).tobytes())
-        f.write(np.uint64(len(cloud)).tobytes() + cloud.tobytes())
-        f.write(mount.astype(np.float64).tobytes())
-        f.write(np.uint64(len(gyro)).tobytes() + np.asarray(gyro, dtype=np.float64).reshape(-1, 4).tobytes())
-        f.write(np.uint64(len(scans)).tobytes())
+        write_header(f, 10.0, cloud, mount, np.asarray(gyro, dtype=np.float64))
+        write_scan_count(f, len(scans))
         for i, (stamp, points, times) in enumerate(scans):
-            f.write(np.float64(stamp).tobytes() + truth[i].astype(np.float64).tobytes())
-            f.write(np.uint64(len(points)).tobytes() + np.ascontiguousarray(points).tobytes())
-            f.write(np.uint64(len(times)).tobytes() + np.ascontiguousarray(times, dtype=np.float32).tobytes())
+            write_scan(f, stamp, truth[i], points, times)
     return len(scans)
 
 
