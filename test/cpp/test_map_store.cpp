@@ -410,30 +410,45 @@ void expectSameVoxels(const gpl::VoxelMap& a, const gpl::VoxelMap& b) {
   });
 }
 
+// The served world behind nginx at url(), and a map store configuration with its own disk cache.
+class MapWorkerOverHttp : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    if (NginxServer::binary().empty()) GTEST_SKIP() << "nginx is not installed (apt-get install nginx-light)";
+    server_ = std::make_unique<NginxServer>(world_.root);
+    server_->start();
+    cache_ = makeTempDir();
+    config_.cache_dir = cache_;
+    config_.retry_backoff = 0.01;
+  }
+  void TearDown() override {
+    if (!cache_.empty()) std::system(("rm -rf '" + cache_ + "'").c_str());
+  }
+
+  std::string url() const { return server_->url("/map"); }
+
+  ServedWorld world_;
+  std::unique_ptr<NginxServer> server_;
+  std::string cache_;
+  gpl::MapStoreConfig config_;
+};
+
 }  // namespace
 
-TEST(MapWorkerOverHttp, ATileDirectoryByUrlGivesTheTargetOfTheLocalDirectoryAndRidesOutTheServerGoingDown) {
-  if (NginxServer::binary().empty()) GTEST_SKIP() << "nginx is not installed (apt-get install nginx-light)";
-  ServedWorld world;
-  ASSERT_GE(world.ids.size(), 60u);
-  NginxServer server(world.root);
-  server.start();
-  const std::string cache = makeTempDir();
-  gpl::MapStoreConfig config;
-  config.cache_dir = cache;
-  config.retry_backoff = 0.01;
-  const std::string url = server.url("/map");
-  const std::vector<std::string> first(world.ids.begin(), world.ids.begin() + 40);
-  const std::vector<std::string> enter(world.ids.begin() + 40, world.ids.begin() + 50);
-  const std::vector<std::string> leave(world.ids.begin(), world.ids.begin() + 10);
+TEST_F(MapWorkerOverHttp, ATileDirectoryByUrlGivesTheTargetOfTheLocalDirectoryAndRidesOutTheServerGoingDown) {
+  ASSERT_GE(world_.ids.size(), 60u);
+  const std::string url = this->url();
+  const std::vector<std::string> first(world_.ids.begin(), world_.ids.begin() + 40);
+  const std::vector<std::string> enter(world_.ids.begin() + 40, world_.ids.begin() + 50);
+  const std::vector<std::string> leave(world_.ids.begin(), world_.ids.begin() + 10);
 
   gpl::VoxelMapParams params;
   gpl::MapUpdateWorker remote(params), local(params);
-  remote.setMapStoreConfig(config);
-  remote.submit(fileChange(url, world.revision(), true, first));
-  remote.submit(fileChange(url, world.revision(), false, enter, leave));
-  local.submit(fileChange(world.root + "/map", "r", true, first));
-  local.submit(fileChange(world.root + "/map", "r", false, enter, leave));
+  remote.setMapStoreConfig(config_);
+  remote.submit(fileChange(url, world_.revision(), true, first));
+  remote.submit(fileChange(url, world_.revision(), false, enter, leave));
+  local.submit(fileChange(world_.root + "/map", "r", true, first));
+  local.submit(fileChange(world_.root + "/map", "r", false, enter, leave));
   remote.waitIdle();
   local.waitIdle();
   EXPECT_EQ(remote.takeErrors(), std::vector<std::string>());
@@ -445,85 +460,75 @@ TEST(MapWorkerOverHttp, ATileDirectoryByUrlGivesTheTargetOfTheLocalDirectoryAndR
   EXPECT_EQ(remote.stats().map_store_fetched, 50u);
 
   // Server down: tiles not held are reported by URL, the loaded ones stay, the status says unreachable.
-  server.stop();
-  remote.submit(fileChange(url, world.revision(), false, {world.ids[55]}));
+  server_->stop();
+  remote.submit(fileChange(url, world_.revision(), false, {world_.ids[55]}));
   remote.waitIdle();
   const std::vector<std::string> errors = remote.takeErrors();
   ASSERT_EQ(errors.size(), 1u);
-  EXPECT_NE(errors[0].find(url + "/" + world.ids[55] + ".pcd"), std::string::npos) << errors[0];
+  EXPECT_NE(errors[0].find(url + "/" + world_.ids[55] + ".pcd"), std::string::npos) << errors[0];
   EXPECT_EQ(remote.stats().tiles, 40u);
   EXPECT_FALSE(remote.stats().map_store_reachable);
   EXPECT_NE(remote.stats().map_store_error.find(url), std::string::npos) << remote.stats().map_store_error;
   // Back: the next delta also fetches the tile that failed.
-  server.start();
-  remote.submit(fileChange(url, world.revision(), false, {world.ids[56]}));
+  server_->start();
+  remote.submit(fileChange(url, world_.revision(), false, {world_.ids[56]}));
   remote.waitIdle();
   EXPECT_EQ(remote.takeErrors(), std::vector<std::string>());
   EXPECT_EQ(remote.stats().tiles, 42u);
   EXPECT_EQ(remote.stats().map_store_fetched, 52u);
   EXPECT_TRUE(remote.stats().map_store_reachable);
   // A reset of the window: the tiles held come from the disk cache.
-  std::vector<std::string> window(world.ids.begin() + 10, world.ids.begin() + 50);
-  window.push_back(world.ids[55]);
-  remote.submit(fileChange(url, world.revision(), true, window));
+  std::vector<std::string> window(world_.ids.begin() + 10, world_.ids.begin() + 50);
+  window.push_back(world_.ids[55]);
+  remote.submit(fileChange(url, world_.revision(), true, window));
   remote.waitIdle();
   EXPECT_EQ(remote.takeErrors(), std::vector<std::string>());
   EXPECT_EQ(remote.stats().tiles, 41u);
   EXPECT_EQ(remote.stats().map_store_fetched, 52u);
 
   // A delta naming another revision than the server's index is refused whole: no tiles of two revisions.
-  remote.submit(fileChange(url, "sha256:0000000000000000", false, {world.ids[57]}));
+  remote.submit(fileChange(url, "sha256:0000000000000000", false, {world_.ids[57]}));
   remote.waitIdle();
   const std::vector<std::string> refused = remote.takeErrors();
   ASSERT_EQ(refused.size(), 1u);
   EXPECT_NE(refused[0].find("revision"), std::string::npos) << refused[0];
   EXPECT_EQ(remote.stats().tiles, 41u);
-  std::system(("rm -rf '" + cache + "'").c_str());
 }
 
-TEST(MapWorkerOverHttp, AfterAnOutageEachChangeRetriesOneFetchBatchOfTheFailedTilesTheLatestFirst) {
-  if (NginxServer::binary().empty()) GTEST_SKIP() << "nginx is not installed (apt-get install nginx-light)";
-  ServedWorld world;
+TEST_F(MapWorkerOverHttp, AfterAnOutageEachChangeRetriesOneFetchBatchOfTheFailedTilesTheLatestFirst) {
   const std::size_t batch = gpl::kTileFetchBatch, late = 5;  // `late` tiles more than one batch failed
-  ASSERT_GE(world.ids.size(), 10 + batch + late);
-  NginxServer server(world.root);
-  server.start();
-  const std::string cache = makeTempDir();
-  gpl::MapStoreConfig config;
-  config.cache_dir = cache;
-  config.retry_backoff = 0.01;
-  const std::string url = server.url("/map");
+  ASSERT_GE(world_.ids.size(), 10 + batch + late);
+  const std::string url = this->url();
   gpl::MapUpdateWorker worker{gpl::VoxelMapParams()};
-  worker.setMapStoreConfig(config);
-  worker.submit(fileChange(url, world.revision(), true, {world.ids.begin(), world.ids.begin() + 10}));
+  worker.setMapStoreConfig(config_);
+  worker.submit(fileChange(url, world_.revision(), true, {world_.ids.begin(), world_.ids.begin() + 10}));
   worker.waitIdle();
   ASSERT_EQ(worker.stats().tiles, 10u);
 
   // The server goes down while the window moves on: every entering tile fails (in this order).
-  server.stop();
-  const std::vector<std::string> entering(world.ids.begin() + 10, world.ids.begin() + 10 + batch + late);
-  worker.submit(fileChange(url, world.revision(), false, entering));
+  server_->stop();
+  const std::vector<std::string> entering(world_.ids.begin() + 10, world_.ids.begin() + 10 + batch + late);
+  worker.submit(fileChange(url, world_.revision(), false, entering));
   worker.waitIdle();
   EXPECT_EQ(worker.takeErrors().size(), entering.size());
   EXPECT_EQ(worker.stats().tiles, 10u);
 
   // Back: the next change fetches one batch of them, not the whole backlog.
-  server.start();
-  worker.submit(fileChange(url, world.revision(), false, {}));
+  server_->start();
+  worker.submit(fileChange(url, world_.revision(), false, {}));
   worker.waitIdle();
   EXPECT_EQ(worker.takeErrors(), std::vector<std::string>());
   EXPECT_TRUE(worker.stats().map_store_reachable);
   EXPECT_EQ(worker.stats().tiles, 10 + batch);
   // The ones left are the earliest failures: they leave the window unloaded (the count stays) and are not fetched.
   const std::vector<std::string> earliest(entering.begin(), entering.begin() + late);
-  worker.submit(fileChange(url, world.revision(), false, {}, earliest));
+  worker.submit(fileChange(url, world_.revision(), false, {}, earliest));
   worker.waitIdle();
-  worker.submit(fileChange(url, world.revision(), false, {}));
+  worker.submit(fileChange(url, world_.revision(), false, {}));
   worker.waitIdle();
   EXPECT_EQ(worker.takeErrors(), std::vector<std::string>());
   EXPECT_EQ(worker.stats().tiles, 10 + batch);
   EXPECT_EQ(worker.stats().map_store_fetched, 10 + batch);
-  std::system(("rm -rf '" + cache + "'").c_str());
 }
 
 // ---- the provider's tile references follow a directory given by URL through its polled index
