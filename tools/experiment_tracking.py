@@ -178,6 +178,7 @@ def figures(variant: str, scenario: Path, run: Path, hog: str | None) -> list[di
             row[f"{key}_yaw_error_deg"] = None if pose is None else rounded(pose["yaw_error_deg"], 2)
         times = m.get("scan_time_ms") or {}
         row["scan_time_ms"] = {k: rounded(times.get(k), 1) for k in ("median", "p95", "p99", "max")}
+        row["slow_scans"] = times.get("slow_scans")
         rows.append(row)
     return rows
 

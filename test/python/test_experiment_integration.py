@@ -59,6 +59,8 @@ def test_every_output_exists_and_parses(run):
         # One status per scan matched, with the time it took: every published pose has one.
         times = read_scan_times(out / mode / "scan_times.csv")
         assert len(times) >= len(traj) and np.all(times[:, 1] >= times[:, 2]) and np.all(times[:, 2] > 0)
+        # What each match did: an accepted match ran at least one NDT iteration.
+        assert np.all(times[times[:, 3] > 0.5, 4] >= 1) and np.all(times[:, 5:] >= 0)
         assert summary["modes"][mode]["scan_time_ms"]["scans"] == len(times)
     assert "## Time per scan" in (out / "report.md").read_text()
     storage = summary["storage"]["tiles"]

@@ -1,7 +1,9 @@
 """The localizer's per-scan times, as the experiment's recorder writes them (``OUT/<mode>/scan_times.csv``):
 one row per scan with its stamp [s], the whole scan's time and the matching's [ms] (NdtStatus
-``scan_time_ms`` and ``align_time_ms``), and whether its match was accepted (``match_accepted``, 1 or 0).
-Tables written before the last column existed are read too; their ``match_accepted`` is NaN (unknown)."""
+``scan_time_ms`` and ``align_time_ms``), whether its match was accepted (``match_accepted``, 1 or 0), and what the
+match did: its NDT iterations, the extra alignments of the hypotheses, and whether the branch-and-bound search ran
+(``iterations``, ``hypotheses``, ``global_search``). Tables written before the later columns existed are read too;
+the columns they lack are NaN (unknown)."""
 
 from __future__ import annotations
 
@@ -13,25 +15,31 @@ import numpy as np
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.util.atomic import atomic_write
 
-HEADER = "stamp_s,scan_time_ms,align_time_ms,match_accepted"
-HEADER_WITHOUT_ACCEPTED = "stamp_s,scan_time_ms,align_time_ms"
-COLUMNS = 4
+HEADER = "stamp_s,scan_time_ms,align_time_ms,match_accepted,iterations,hypotheses,global_search"
+# Older tables: the header's first columns.
+OLDER_HEADERS = ("stamp_s,scan_time_ms,align_time_ms,match_accepted", "stamp_s,scan_time_ms,align_time_ms")
+COLUMNS = len(HEADER.split(","))
+# Scans slower than this many times the median are the tail the issue bounds (p95 <= 2x the median).
+SLOW_OVER_MEDIAN = 2.0
 
 
-def write_scan_times(path: str | os.PathLike, rows: Sequence[tuple[float, float, float, bool]]) -> None:
+def write_scan_times(path: str | os.PathLike, rows: Sequence[tuple[float, float, float, bool, int, int, bool]]) -> None:
     with atomic_write(path) as f:
         f.write(HEADER + "\n")
-        for stamp, scan_ms, align_ms, accepted in rows:
-            f.write(f"{stamp:.9f},{scan_ms:.4f},{align_ms:.4f},{int(bool(accepted))}\n")
+        for stamp, scan_ms, align_ms, accepted, iterations, hypotheses, searched in rows:
+            f.write(
+                f"{stamp:.9f},{scan_ms:.4f},{align_ms:.4f},{int(bool(accepted))},{int(iterations)},"
+                f"{int(hypotheses)},{int(bool(searched))}\n"
+            )
 
 
 def read_scan_times(path: str | os.PathLike) -> np.ndarray:
-    """An (n, 4) array of the rows (stamp, scan ms, align ms, accepted); raises UserError naming the file when it is
-    not such a table."""
+    """An (n, 7) array of the rows (stamp, scan ms, align ms, accepted, iterations, hypotheses, search); raises
+    UserError naming the file when it is not such a table."""
     try:
         with open(path) as f:
             header = f.readline().strip()
-            if header not in (HEADER, HEADER_WITHOUT_ACCEPTED):
+            if header != HEADER and header not in OLDER_HEADERS:
                 raise UserError(f"{path}: first line is {header!r}, expected {HEADER!r}: not a scan-time table")
             columns = len(header.split(","))
             rows = [line for line in f if line.strip()]
@@ -44,7 +52,7 @@ def read_scan_times(path: str | os.PathLike) -> np.ndarray:
         raise UserError(f"{path}: rows have {data.shape[1]} columns, expected {columns} ({header})")
     data = data.reshape(-1, columns)
     if columns < COLUMNS:
-        data = np.hstack([data, np.full((len(data), 1), np.nan)])
+        data = np.hstack([data, np.full((len(data), COLUMNS - columns), np.nan)])
     return data
 
 
@@ -58,10 +66,10 @@ def accepted_stamps(data: np.ndarray) -> np.ndarray | None:
 
 def summarize_scan_times(data: np.ndarray) -> dict:
     """Mean, median, 95th and 99th percentile (linear interpolation between order statistics, numpy's default)
-    and maximum of the whole scan's time [ms], and the scans counted."""
+    and maximum of the whole scan's time [ms], the scans counted, and what the slow scans did (slow_scans)."""
     times = data[:, 1]
     if times.size == 0:
-        return {"scans": 0, "mean": None, "median": None, "p95": None, "p99": None, "max": None}
+        return {"scans": 0, "mean": None, "median": None, "p95": None, "p99": None, "max": None, "slow_scans": None}
     return {
         "scans": int(times.size),
         "mean": float(times.mean()),
@@ -69,4 +77,21 @@ def summarize_scan_times(data: np.ndarray) -> dict:
         "p95": float(np.percentile(times, 95)),
         "p99": float(np.percentile(times, 99)),
         "max": float(times.max()),
+        "slow_scans": slow_scans(data),
+    }
+
+
+def slow_scans(data: np.ndarray) -> dict | None:
+    """The scans over SLOW_OVER_MEDIAN times the median scan time: how many, how many of them ran the hypotheses or
+    the search, and their median NDT iterations against all scans'; None when the table does not say (older)."""
+    if data.size == 0 or np.isnan(data[:, 4:]).any():
+        return None
+    slow = data[data[:, 1] > SLOW_OVER_MEDIAN * np.median(data[:, 1])]
+    return {
+        "over_median": SLOW_OVER_MEDIAN,
+        "scans": len(slow),
+        "with_hypotheses": int(np.count_nonzero(slow[:, 5] > 0)),
+        "with_search": int(np.count_nonzero(slow[:, 6] > 0.5)),
+        "median_iterations": float(np.median(slow[:, 4])) if len(slow) else None,
+        "median_iterations_all": float(np.median(data[:, 4])),
     }

@@ -166,14 +166,22 @@ def scan_time_table(summary: Mapping) -> list[str]:
         return ["No per-scan times were recorded."]
     fusion = summary["scenario"].get("fusion", "–")
     lines = [
-        "| mode | fusion | scans | mean [ms] | median [ms] | p95 [ms] | p99 [ms] | max [ms] |",
-        "|---|---|---:|---:|---:|---:|---:|---:|",
+        "| mode | fusion | scans | mean [ms] | median [ms] | p95 [ms] | p99 [ms] | max [ms] "
+        "| over 2x median | of them with hypotheses / search | NDT iterations, median of them / of all |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for mode, t in rows:
         if t:
+            slow = t.get("slow_scans")
+            what = (
+                "– | – | –"
+                if not slow
+                else f"{slow['scans']} | {slow['with_hypotheses']} / {slow['with_search']} "
+                f"| {num(slow['median_iterations'])} / {num(slow['median_iterations_all'])}"
+            )
             lines.append(
                 f"| {mode_title(mode)} | {fusion} | {t['scans']} | {num(t['mean'])} "
-                f"| {num(t['median'])} | {num(t.get('p95'))} | {num(t.get('p99'))} | {num(t.get('max'))} |"
+                f"| {num(t['median'])} | {num(t.get('p95'))} | {num(t.get('p99'))} | {num(t.get('max'))} | {what} |"
             )
     return lines
 
@@ -331,7 +339,9 @@ def render_report(summary: Mapping) -> str:
         *scan_time_table(summary),
         "",
         "The localizer's own time for each scan (NdtStatus scan_time_ms): preprocessing, the NDT match with any",
-        "hypotheses or search, and the sliding window's update when fusion is on.",
+        "hypotheses or search, and the sliding window's update when fusion is on. The scans that took more than",
+        "twice the median: how many ran the hypotheses (extra alignments after a poor match) or the search, and",
+        "their NDT iterations against every scan's.",
         "",
         "## Storage",
         "",

@@ -1,7 +1,7 @@
 """Node that records an Odometry topic as a TUM trajectory, written when the node shuts down.
 
 Subscribes: ``odom`` (nav_msgs/Odometry) and, when ``~scan_times`` (a CSV path) is set, ``status`` (the
-localizer's NdtStatus, for its per-scan times and whether each match was accepted). Parameters: ``~output``
+localizer's NdtStatus, for its per-scan times, whether each match was accepted and what it did). Parameters: ``~output``
 (path of the TUM file). Optionally publishes, once and latched (geometry_msgs/PoseWithCovarianceStamped in
 ``~frame_id``, default ``map``), ``~initial_pose`` (7 numbers x y z qx qy qz qw) on ``initialpose``, which is how
 the experiment seeds the localizer and the map provider, and ``~hint`` (x, y [m] and its standard deviation
@@ -27,14 +27,24 @@ class TrajectoryRecorder:
         self.output = output
         self.scan_times_output = scan_times
         self.rows: list[tuple[float, ...]] = []
-        self.scan_times: list[tuple[float, float, float, bool]] = []
+        self.scan_times: list[tuple[float, float, float, bool, int, int, bool]] = []
         self.dropped = 0
         self.sub = rospy.Subscriber("odom", Odometry, self.on_odom, queue_size=100)
         if scan_times:
             self.status_sub = rospy.Subscriber("status", NdtStatus, self.on_status, queue_size=100)
 
     def on_status(self, msg: NdtStatus) -> None:
-        self.scan_times.append((msg.header.stamp.to_sec(), msg.scan_time_ms, msg.align_time_ms, msg.match_accepted))
+        self.scan_times.append(
+            (
+                msg.header.stamp.to_sec(),
+                msg.scan_time_ms,
+                msg.align_time_ms,
+                msg.match_accepted,
+                msg.iterations,
+                msg.hypotheses,
+                msg.global_search,
+            )
+        )
 
     def on_odom(self, msg: Odometry) -> None:
         p, q = msg.pose.pose.position, msg.pose.pose.orientation
