@@ -10,6 +10,7 @@ import pytest
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation.scan_times import (
     HEADER,
+    OLDER_HEADERS,
     accepted_stamps,
     read_scan_times,
     summarize_scan_times,
@@ -23,9 +24,9 @@ def test_round_trip_and_summary(tmp_path):
     # linearly between order statistics, is 1 + 99 q / 100 (95.05 and 99.01); the maximum 100.
     rng = np.random.default_rng(4)
     ms = rng.permutation(np.arange(1, 101)).astype(float)
-    # Iterations: the scan time's tens digit; hypotheses on every 4th scan, a search on every 10th.
+    # Iterations: the scan time's tens digit; hypotheses on every 4th scan, a search on every 10th; NVTL falling.
     rows = [
-        (1700000000.0 + 0.1 * i, s, 0.6 * s, i % 3 != 0, int(s) // 10, 2 * (i % 4 == 0), i % 10 == 0)
+        (1700000000.0 + 0.1 * i, s, 0.6 * s, i % 3 != 0, int(s) // 10, 2 * (i % 4 == 0), i % 10 == 0, 2.5 - s / 100)
         for i, s in enumerate(ms)
     ]
     path = tmp_path / "scan_times.csv"
@@ -67,6 +68,14 @@ def test_a_table_without_what_the_match_did_is_read_and_says_nothing_of_it(tmp_p
     assert np.isnan(data[:, 4:]).all() and summarize_scan_times(data)["slow_scans"] is None
 
 
+def test_a_table_without_the_nvtl_still_says_what_the_slow_scans_did(tmp_path):
+    (tmp_path / "t.csv").write_text(OLDER_HEADERS[0] + "\n1.5,10,8,1,4,0,0\n1.6,11,9,1,5,0,0\n1.7,40,38,1,20,4,0\n")
+    data = read_scan_times(tmp_path / "t.csv")
+    assert np.isnan(data[:, 7]).all()
+    slow = summarize_scan_times(data)["slow_scans"]
+    assert (slow["scans"], slow["with_hypotheses"], slow["median_iterations"]) == (1, 1, 20.0)
+
+
 def test_an_empty_run_has_no_figures(tmp_path):
     write_scan_times(tmp_path / "t.csv", [])
     assert summarize_scan_times(read_scan_times(tmp_path / "t.csv")) == {
@@ -87,7 +96,7 @@ def test_an_empty_run_has_no_figures(tmp_path):
         ("stamp_s,scan_time_ms,align_time_ms\n1,2\n", "t.csv"),
         ("stamp_s,scan_time_ms,align_time_ms\n1,x,3\n", "not 3 numbers"),
         ("stamp_s,scan_time_ms,align_time_ms,match_accepted\n1,2,3\n", "expected 4"),
-        (HEADER + "\n1,2,3,1,5,0\n", "expected 7"),
+        (HEADER + "\n1,2,3,1,5,0,0\n", "expected 8"),
     ],
 )
 def test_bad_files_are_named(tmp_path, text, message):

@@ -1,9 +1,9 @@
 """The localizer's per-scan times, as the experiment's recorder writes them (``OUT/<mode>/scan_times.csv``):
 one row per scan with its stamp [s], the whole scan's time and the matching's [ms] (NdtStatus
 ``scan_time_ms`` and ``align_time_ms``), whether its match was accepted (``match_accepted``, 1 or 0), and what the
-match did: its NDT iterations, the extra alignments of the hypotheses, and whether the branch-and-bound search ran
-(``iterations``, ``hypotheses``, ``global_search``). Tables written before the later columns existed are read too;
-the columns they lack are NaN (unknown)."""
+match did: its NDT iterations, the extra alignments of the hypotheses, whether the branch-and-bound search ran, and
+the NVTL of the match taken (``iterations``, ``hypotheses``, ``global_search``, ``nvtl``). Tables written before
+the later columns existed are read too; the columns they lack are NaN (unknown)."""
 
 from __future__ import annotations
 
@@ -15,27 +15,33 @@ import numpy as np
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.util.atomic import atomic_write
 
-HEADER = "stamp_s,scan_time_ms,align_time_ms,match_accepted,iterations,hypotheses,global_search"
+HEADER = "stamp_s,scan_time_ms,align_time_ms,match_accepted,iterations,hypotheses,global_search,nvtl"
 # Older tables: the header's first columns.
-OLDER_HEADERS = ("stamp_s,scan_time_ms,align_time_ms,match_accepted", "stamp_s,scan_time_ms,align_time_ms")
+OLDER_HEADERS = (
+    "stamp_s,scan_time_ms,align_time_ms,match_accepted,iterations,hypotheses,global_search",
+    "stamp_s,scan_time_ms,align_time_ms,match_accepted",
+    "stamp_s,scan_time_ms,align_time_ms",
+)
 COLUMNS = len(HEADER.split(","))
 # Scans slower than this many times the median are the tail the issue bounds (p95 <= 2x the median).
 SLOW_OVER_MEDIAN = 2.0
 
 
-def write_scan_times(path: str | os.PathLike, rows: Sequence[tuple[float, float, float, bool, int, int, bool]]) -> None:
+def write_scan_times(
+    path: str | os.PathLike, rows: Sequence[tuple[float, float, float, bool, int, int, bool, float]]
+) -> None:
     with atomic_write(path) as f:
         f.write(HEADER + "\n")
-        for stamp, scan_ms, align_ms, accepted, iterations, hypotheses, searched in rows:
+        for stamp, scan_ms, align_ms, accepted, iterations, hypotheses, searched, nvtl in rows:
             f.write(
                 f"{stamp:.9f},{scan_ms:.4f},{align_ms:.4f},{int(bool(accepted))},{int(iterations)},"
-                f"{int(hypotheses)},{int(bool(searched))}\n"
+                f"{int(hypotheses)},{int(bool(searched))},{nvtl:.4f}\n"
             )
 
 
 def read_scan_times(path: str | os.PathLike) -> np.ndarray:
-    """An (n, 7) array of the rows (stamp, scan ms, align ms, accepted, iterations, hypotheses, search); raises
-    UserError naming the file when it is not such a table."""
+    """An (n, 8) array of the rows (stamp, scan ms, align ms, accepted, iterations, hypotheses, search, NVTL);
+    raises UserError naming the file when it is not such a table."""
     try:
         with open(path) as f:
             header = f.readline().strip()
@@ -84,7 +90,7 @@ def summarize_scan_times(data: np.ndarray) -> dict:
 def slow_scans(data: np.ndarray) -> dict | None:
     """The scans over SLOW_OVER_MEDIAN times the median scan time: how many, how many of them ran the hypotheses or
     the search, and their median NDT iterations against all scans'; None when the table does not say (older)."""
-    if data.size == 0 or np.isnan(data[:, 4:]).any():
+    if data.size == 0 or np.isnan(data[:, 4:7]).any():
         return None
     slow = data[data[:, 1] > SLOW_OVER_MEDIAN * np.median(data[:, 1])]
     return {

@@ -27,7 +27,7 @@ class TrajectoryRecorder:
         self.output = output
         self.scan_times_output = scan_times
         self.rows: list[tuple[float, ...]] = []
-        self.scan_times: list[tuple[float, float, float, bool, int, int, bool]] = []
+        self.scan_times: list[tuple[float, float, float, bool, int, int, bool, float]] = []
         self.dropped = 0
         self.sub = rospy.Subscriber("odom", Odometry, self.on_odom, queue_size=100)
         if scan_times:
@@ -43,6 +43,7 @@ class TrajectoryRecorder:
                 msg.iterations,
                 msg.hypotheses,
                 msg.global_search,
+                msg.nvtl,
             )
         )
 
