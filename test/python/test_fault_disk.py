@@ -109,10 +109,23 @@ def test_disk_full_during_simulate_keeps_previous_output(small_disk):
     record("disk full during gpm simulate", f"exit {rc}: {err.strip()}", round(seconds, 2))
 
 
+def writing_tiles(parent: Path, name: str) -> bool:
+    """Whether a tile file is in the tiler's staging directory for output ``name`` yet (stops at the first one
+    found: listing a directory of thousands of files each poll would let a fast tiler finish unseen)."""
+    for staging in parent.glob(f".{name}.tmp-*"):
+        try:
+            with os.scandir(staging) as entries:
+                if any(e.name.endswith(".pcd") for e in entries):
+                    return True
+        except FileNotFoundError:  # moved into place or removed meanwhile
+            continue
+    return False
+
+
 @pytest.mark.parametrize("jobs", ["1", "2"])
 def test_sigint_during_tile_leaves_no_partial_output(tmp_path, jobs):
     """SIGINT once the tiler writes tile files (into its staging directory), in the single-process tiler
-    and with forked tile writers (40,000 tiles)."""
+    and with forked tile writers (160,000 tiles: enough that a busy machine's poll sees the writing)."""
     big = random_map(tmp_path / "big.pcd", 2_000_000, 400.0, seed=3)
     previous = tmp_path / "previous"
     rc, err = finished(
@@ -121,9 +134,9 @@ def test_sigint_during_tile_leaves_no_partial_output(tmp_path, jobs):
     assert rc == 0, err
     before = snapshot(previous)
     for target, force in ((tmp_path / "fresh", []), (previous, ["--force"])):
-        proc = gpm("tile", "--grid-size", "2", "--jobs", jobs, "--no-progress", str(big), "-o", str(target), *force)
+        proc = gpm("tile", "--grid-size", "1", "--jobs", jobs, "--no-progress", str(big), "-o", str(target), *force)
         deadline = time.monotonic() + 120
-        while not list(tmp_path.glob(f".{target.name}.tmp-*/*.pcd")) and proc.poll() is None:
+        while not writing_tiles(tmp_path, target.name) and proc.poll() is None:
             assert time.monotonic() < deadline, "the tiler never started writing"
             time.sleep(0.01)
         interrupted = time.monotonic()
