@@ -10,7 +10,6 @@ import pytest
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation.scan_times import (
     HEADER,
-    OLDER_HEADERS,
     accepted_stamps,
     read_scan_times,
     summarize_scan_times,
@@ -69,7 +68,8 @@ def test_a_table_without_what_the_match_did_is_read_and_says_nothing_of_it(tmp_p
 
 
 def test_a_table_without_the_nvtl_still_says_what_the_slow_scans_did(tmp_path):
-    (tmp_path / "t.csv").write_text(OLDER_HEADERS[0] + "\n1.5,10,8,1,4,0,0\n1.6,11,9,1,5,0,0\n1.7,40,38,1,20,4,0\n")
+    older = ",".join(HEADER.split(",")[:7])  # before the NVTL column
+    (tmp_path / "t.csv").write_text(older + "\n1.5,10,8,1,4,0,0\n1.6,11,9,1,5,0,0\n1.7,40,38,1,20,4,0\n")
     data = read_scan_times(tmp_path / "t.csv")
     assert np.isnan(data[:, 7]).all()
     slow = summarize_scan_times(data)["slow_scans"]

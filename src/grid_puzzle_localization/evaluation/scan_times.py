@@ -16,13 +16,10 @@ from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.util.atomic import atomic_write
 
 HEADER = "stamp_s,scan_time_ms,align_time_ms,match_accepted,iterations,hypotheses,global_search,nvtl"
-# Older tables: the header's first columns.
-OLDER_HEADERS = (
-    "stamp_s,scan_time_ms,align_time_ms,match_accepted,iterations,hypotheses,global_search",
-    "stamp_s,scan_time_ms,align_time_ms,match_accepted",
-    "stamp_s,scan_time_ms,align_time_ms",
-)
-COLUMNS = len(HEADER.split(","))
+COLUMN = {name: index for index, name in enumerate(HEADER.split(","))}
+COLUMNS = len(COLUMN)
+# Older tables have the header's first columns: as many as these.
+OLDER_COLUMNS = (3, 4, 7)
 # Scans slower than this many times the median are the tail the issue bounds (p95 <= 2x the median).
 SLOW_OVER_MEDIAN = 2.0
 
@@ -45,9 +42,9 @@ def read_scan_times(path: str | os.PathLike) -> np.ndarray:
     try:
         with open(path) as f:
             header = f.readline().strip()
-            if header != HEADER and header not in OLDER_HEADERS:
-                raise UserError(f"{path}: first line is {header!r}, expected {HEADER!r}: not a scan-time table")
             columns = len(header.split(","))
+            if columns not in (*OLDER_COLUMNS, COLUMNS) or header != ",".join(HEADER.split(",")[:columns]):
+                raise UserError(f"{path}: first line is {header!r}, expected {HEADER!r}: not a scan-time table")
             rows = [line for line in f if line.strip()]
             data = np.loadtxt(rows, delimiter=",", ndmin=2) if rows else np.empty((0, columns))
     except OSError as err:
@@ -64,7 +61,7 @@ def read_scan_times(path: str | os.PathLike) -> np.ndarray:
 
 def accepted_stamps(data: np.ndarray) -> np.ndarray | None:
     """Stamps [s] of the scans whose match was accepted; None when the table does not say (an older table)."""
-    accepted = data[:, 3]
+    accepted = data[:, COLUMN["match_accepted"]]
     if np.isnan(accepted).any():
         return None
     return data[accepted > 0.5, 0]
@@ -90,14 +87,16 @@ def summarize_scan_times(data: np.ndarray) -> dict:
 def slow_scans(data: np.ndarray) -> dict | None:
     """The scans over SLOW_OVER_MEDIAN times the median scan time: how many, how many of them ran the hypotheses or
     the search, and their median NDT iterations against all scans'; None when the table does not say (older)."""
-    if data.size == 0 or np.isnan(data[:, 4:7]).any():
+    iterations, hypotheses, search = COLUMN["iterations"], COLUMN["hypotheses"], COLUMN["global_search"]
+    if data.size == 0 or np.isnan(data[:, [iterations, hypotheses, search]]).any():
         return None
-    slow = data[data[:, 1] > SLOW_OVER_MEDIAN * np.median(data[:, 1])]
+    times = data[:, COLUMN["scan_time_ms"]]
+    slow = data[times > SLOW_OVER_MEDIAN * np.median(times)]
     return {
         "over_median": SLOW_OVER_MEDIAN,
         "scans": len(slow),
-        "with_hypotheses": int(np.count_nonzero(slow[:, 5] > 0)),
-        "with_search": int(np.count_nonzero(slow[:, 6] > 0.5)),
-        "median_iterations": float(np.median(slow[:, 4])) if len(slow) else None,
-        "median_iterations_all": float(np.median(data[:, 4])),
+        "with_hypotheses": int(np.count_nonzero(slow[:, hypotheses] > 0)),
+        "with_search": int(np.count_nonzero(slow[:, search] > 0.5)),
+        "median_iterations": float(np.median(slow[:, iterations])) if len(slow) else None,
+        "median_iterations_all": float(np.median(data[:, iterations])),
     }

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from grid_puzzle_localization.evaluation.scan_times import SLOW_OVER_MEDIAN
 from grid_puzzle_localization.experiment.modes import GRID_PUZZLE_MODES
 from grid_puzzle_localization.report.format import MIB, change, mib, mode_title, num, times
 from grid_puzzle_localization.report.headline import headline_section
@@ -167,7 +168,8 @@ def scan_time_table(summary: Mapping) -> list[str]:
     fusion = summary["scenario"].get("fusion", "–")
     lines = [
         "| mode | fusion | scans | mean [ms] | median [ms] | p95 [ms] | p99 [ms] | max [ms] "
-        "| over 2x median | of them with hypotheses / search | NDT iterations, median of them / of all |",
+        f"| over {SLOW_OVER_MEDIAN:g}x median | of them with hypotheses / search "
+        "| NDT iterations, median of them / of all |",
         "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for mode, t in rows:
@@ -340,8 +342,8 @@ def render_report(summary: Mapping) -> str:
         "",
         "The localizer's own time for each scan (NdtStatus scan_time_ms): preprocessing, the NDT match with any",
         "hypotheses or search, and the sliding window's update when fusion is on. The scans that took more than",
-        "twice the median: how many ran the hypotheses (extra alignments after a poor match) or the search, and",
-        "their NDT iterations against every scan's.",
+        f"{SLOW_OVER_MEDIAN:g} times the median: how many ran the hypotheses (extra alignments after a poor match) or",
+        "the search, and their NDT iterations against every scan's.",
         "",
         "## Storage",
         "",
