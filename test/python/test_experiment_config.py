@@ -60,6 +60,7 @@ def test_presets_and_overrides(tmp_path):
             "bag /nonexistent.bag does not exist",
         ),
         (["SCN", "-o", "out", "--rate", "0"], "--rate must be > 0"),
+        (["SCN", "-o", "out", "--repeats", "0"], "--repeats must be >= 1"),
         (["SCN", "-o", "out", "--modes", "block_map", "--block-size", "0"], "--block-size must be > 0"),
     ],
 )

@@ -65,6 +65,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="bag playback speed, times real time (default %(default)s)",
     )  # fmt: skip
     parser.add_argument(
+        "--repeats", type=int, default=ExperimentConfig.repeats,
+        help="runs of each mode, interleaved (every mode once per round); the report gives the median CPU and "
+        "memory over them and their spread (default %(default)s)",
+    )  # fmt: skip
+    parser.add_argument(
         "--interval", type=float, default=ExperimentConfig.monitor_interval_s,
         help="monitor sampling period [s] (default %(default)s)",
     )  # fmt: skip
@@ -153,6 +158,7 @@ def config_from_args(args: argparse.Namespace) -> ExperimentConfig:
         preset=args.preset,
         window=window,
         rate=args.rate,
+        repeats=args.repeats,
         monitor_interval_s=args.interval,
         max_time_diff_s=args.max_time_diff,
         settle_s=args.settle,

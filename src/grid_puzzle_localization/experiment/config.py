@@ -57,6 +57,9 @@ class ExperimentConfig:
     window: WindowPreset = PRESETS["demo"]
     rate: float = 1.0  # bag playback speed, times real time
     monitor_interval_s: float = 0.5
+    # Runs of each mode, interleaved (modes.interleaved_runs); the report gives the median and the spread. One run's
+    # CPU varies by tenths of a point on a 2-core machine, as much as the difference between modes.
+    repeats: int = 1
     max_time_diff_s: float = 0.05  # pose association tolerance
     startup_timeout_s: float = 60.0
     settle_s: float = 2.0  # after the nodes are up, and after the bag ends
@@ -85,6 +88,8 @@ class ExperimentConfig:
             raise UserError(f"give at least one mode (--modes {' '.join(DEFAULT_MODES)})")
         if not self.rate > 0:
             raise UserError(f"--rate must be > 0 (got {self.rate})")
+        if self.repeats < 1:
+            raise UserError(f"--repeats must be >= 1, the runs of each mode (got {self.repeats})")
         if not self.monitor_interval_s > 0:
             raise UserError(f"--interval must be > 0 s (got {self.monitor_interval_s})")
         for label, path in (("bag", self.bag), ("global map", self.global_map), ("ground truth", self.ground_truth)):

@@ -26,3 +26,12 @@ MODES = tuple(LAUNCH_MODES)
 GRID_PUZZLE_MODES = ("grid_puzzle", "grid_puzzle_rospy")  # the modes that play the tiles
 DEFAULT_MODES = ("global", *GRID_PUZZLE_MODES)
 EMPTY_MAP_MODES = DEFAULT_MODES  # the modes whose floor an empty-map run measures
+
+
+def interleaved_runs(modes: list[str] | tuple[str, ...], repeats: int) -> list[tuple[int, str]]:
+    """The order of an experiment's runs as (repeat, mode), repeat from 1: every mode once per round, the rounds in
+    turn (global, grid_puzzle, global, grid_puzzle, ...), so a slow spell of the machine falls on every mode
+    alike rather than on all the repeats of one."""
+    if repeats < 1:
+        raise ValueError(f"repeats must be >= 1 (got {repeats})")
+    return [(repeat, mode) for repeat in range(1, repeats + 1) for mode in modes]

@@ -1,6 +1,6 @@
-"""Runs one experiment: for each mode a fresh roscore and roslaunch, the resource monitor on the
-mode's processes, the bag played with clock, the localizer's odometry recorded as TUM, and a clean
-shutdown; then the evaluation report."""
+"""Runs one experiment: for each run of a mode (the modes interleaved when each runs more than once) a fresh
+roscore and roslaunch, the resource monitor on the mode's processes, the bag played with clock, the localizer's
+odometry recorded as TUM, and a clean shutdown; then the evaluation report."""
 
 from __future__ import annotations
 
@@ -21,7 +21,12 @@ from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.evaluation.trajectory import read_tum
 from grid_puzzle_localization.experiment.config import ExperimentConfig
 from grid_puzzle_localization.experiment.maps import write_empty_map
-from grid_puzzle_localization.experiment.modes import EMPTY_MAP_MODES, GRID_PUZZLE_MODES, LAUNCH_MODES
+from grid_puzzle_localization.experiment.modes import (
+    EMPTY_MAP_MODES,
+    GRID_PUZZLE_MODES,
+    LAUNCH_MODES,
+    interleaved_runs,
+)
 from grid_puzzle_localization.experiment.processes import ManagedProcess, wait_for
 from grid_puzzle_localization.experiment.ros_stack import RosCore, rosbag_play, roslaunch, run_node
 from grid_puzzle_localization.experiment.start import Start, start_from
@@ -36,6 +41,7 @@ from grid_puzzle_localization.report.build import (
     TRAJECTORY,
     RunInfo,
     build_report,
+    run_dir,
     write_json,
     write_run_info,
 )
@@ -50,6 +56,7 @@ class ModeOutcome:
     processes: list[str]
     killed_pids: list[int]  # needed SIGKILL at shutdown (should be empty)
     stray_pids: list[int]  # still alive after shutdown (must be empty)
+    repeat: int = 1  # the mode's run number (--repeats)
 
 
 def initial_pose_from(trajectory_path: Path) -> list[float]:
@@ -245,7 +252,8 @@ def run_empty_map(cfg: ExperimentConfig, mode: str, start: Start) -> ModeOutcome
 
 
 def run_experiment(cfg: ExperimentConfig, tiles: Path | str | None, storage: dict | None) -> dict:
-    """Every mode in turn, then the report. Returns the summary."""
+    """Every mode in turn, ``cfg.repeats`` rounds of them (the empty-map runs in the first), then the report.
+    Returns the summary."""
     cfg.check()
     cfg.out_dir.mkdir(parents=True, exist_ok=True)
     # Where the run really starts; the localizer is given it, moved, a hint near it, or nothing (cfg.start).
@@ -260,10 +268,14 @@ def run_experiment(cfg: ExperimentConfig, tiles: Path | str | None, storage: dic
     else:
         say("start", "no pose and no hint: the localizer's global search")
     outcomes = []
-    for mode in cfg.modes:
-        inputs = ModeInputs(cfg.global_map, tiles if mode in GRID_PUZZLE_MODES else None, cfg.out_dir / mode)
-        outcomes.append(run_mode(cfg, mode, inputs, start))
-        if cfg.empty_map_s > 0 and mode in EMPTY_MAP_MODES:
+    # The first round empties OUT/<mode>/, which holds the later rounds' directories, before any of them is written.
+    for repeat, mode in interleaved_runs(cfg.modes, cfg.repeats):
+        if cfg.repeats > 1:
+            say(mode, f"run {repeat} of {cfg.repeats}")
+        out = run_dir(cfg.out_dir, mode, repeat)
+        inputs = ModeInputs(cfg.global_map, tiles if mode in GRID_PUZZLE_MODES else None, out)
+        outcomes.append(dataclasses.replace(run_mode(cfg, mode, inputs, start), repeat=repeat))
+        if repeat == 1 and cfg.empty_map_s > 0 and mode in EMPTY_MAP_MODES:
             outcomes.append(run_empty_map(cfg, mode, start))
     scenario = {
         "name": cfg.scenario_name,
@@ -285,6 +297,7 @@ def run_experiment(cfg: ExperimentConfig, tiles: Path | str | None, storage: dic
         global_map=str(cfg.global_map.resolve()),
         storage=storage,
         max_diff_s=cfg.max_time_diff_s,
+        repeats=cfg.repeats,
         extra={
             "outcomes": [asdict(o) for o in outcomes],
             "initial_pose": start.initial_pose,
