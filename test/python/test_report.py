@@ -12,8 +12,9 @@ import pytest
 from matplotlib.image import imread
 
 from grid_puzzle_localization.cli import main
+from grid_puzzle_localization.evaluation.resources import mode_resources
 from grid_puzzle_localization.evaluation.trajectory import make_trajectory, write_tum
-from grid_puzzle_localization.monitor.log import METRICS, MonitorLog, write_csv
+from grid_puzzle_localization.monitor.log import METRICS, MonitorLog, read_csv, write_csv
 from grid_puzzle_localization.pcd.writer import write_pcd
 from grid_puzzle_localization.report.build import RunInfo, build_report, write_run_info
 from grid_puzzle_localization.report.map_view import map_top_view
@@ -172,6 +173,24 @@ def test_report_figures_match_closed_form(experiment):
     assert memory["grid_puzzle_rospy"]["paper"]["map_bytes"] == (100 - 25 + 60 - 50) * MIB
     assert on_disk["map_memory_ratios"]["grid_puzzle"]["paper"] == pytest.approx(109 / 280)
     assert on_disk["map_memory_ratios"]["grid_puzzle_rospy"]["paper"] == pytest.approx(85 / 280)
+
+
+def test_one_run_per_mode_gives_that_runs_figures(experiment):
+    # Without --repeats every resource figure is the one run's, as computed from its monitor log alone, and the spread
+    # is that run: 60 % for the paper's setup, 0.75 of the global map's 80 %.
+    summary = build_report(experiment)
+    assert summary["repeats"]["count"] == 1
+    for mode, m in summary["modes"].items():
+        single = mode_resources(mode, m["roles"], read_csv(experiment / mode / "monitor.csv"))
+        assert m["resources"] == single
+        assert m["per_repeat"] == [{"repeat": 1, "resources": single, "events": []}]
+    spread = summary["repeats"]["spread"]["grid_puzzle_rospy"]["paper"]["cpu_percent"]
+    assert spread == {
+        "means": [60.0],
+        "min": 60.0,
+        "max": 60.0,
+        "vs_baseline": {"per_repeat": [0.75], "min": 0.75, "max": 0.75},
+    }
 
 
 def test_first_section_shows_both_grid_puzzle_modes_against_the_global_map(experiment):

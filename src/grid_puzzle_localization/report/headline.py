@@ -16,14 +16,40 @@ def headline_modes(summary: Mapping) -> list[str]:
     return [m for m in (summary["baseline_mode"], *GRID_PUZZLE_MODES) if m in summary["modes"]]
 
 
+def repeat_count(summary: Mapping) -> int:
+    """Runs of each mode (1 when the summary has no repeats section)."""
+    return (summary.get("repeats") or {}).get("count", 1)
+
+
+def _x(value: float) -> str:
+    return f"{value:.2f}"
+
+
+def _range(spread: Mapping | None, fmt) -> str:
+    """A spread entry's "min–max"; "–" when missing."""
+    if not spread or spread.get("min") is None:
+        return "–"
+    return f"{fmt(spread['min'])}–{fmt(spread['max'])}"
+
+
 def resources_vs_global_table(summary: Mapping) -> list[str]:
-    """Per protocol and mode: mean CPU and mean RSS, each with its ratio to the baseline's."""
+    """Per protocol and mode: mean CPU and mean RSS, each with its ratio to the baseline's. With repeated runs the
+    figures are medians, and the CPU means' range and each figure's range of per-round ratios are added."""
     modes = summary["modes"]
     base = modes.get(summary["baseline_mode"], {}).get("resources", {})
-    lines = [
-        "| protocol | mode | processes | CPU mean [% of one core] | vs global | RSS mean [MiB] | vs global |",
-        "|---|---|---|---:|---:|---:|---:|",
-    ]
+    repeated = repeat_count(summary) > 1
+    spread = (summary.get("repeats") or {}).get("spread", {})
+    if repeated:
+        lines = [
+            "| protocol | mode | processes | CPU mean [% of one core], median | runs, min–max | vs global "
+            "| per round, min–max | RSS mean [MiB], median | vs global | per round, min–max |",
+            "|---|---|---|---:|---:|---:|---:|---:|---:|---:|",
+        ]
+    else:
+        lines = [
+            "| protocol | mode | processes | CPU mean [% of one core] | vs global | RSS mean [MiB] | vs global |",
+            "|---|---|---|---:|---:|---:|---:|",
+        ]
     for protocol in PROTOCOLS:
         for mode in headline_modes(summary):
             r = modes[mode]["resources"][protocol]
@@ -31,11 +57,35 @@ def resources_vs_global_table(summary: Mapping) -> list[str]:
             cpu, rss = r["cpu_percent"]["mean"], r["rss_bytes"]["mean"]
             cpu_ratio = ratio(cpu, b["cpu_percent"]["mean"]) if b else None
             rss_ratio = ratio(rss, b["rss_bytes"]["mean"]) if b else None
-            lines.append(
-                f"| {protocol} | {mode_title(mode)} | {', '.join(r['processes'])} | {num(cpu)} | {times(cpu_ratio)} "
-                f"| {mib(rss)} | {times(rss_ratio)} |"
-            )
+            if repeated:
+                s = spread.get(mode, {}).get(protocol, {})
+                cpu_s, rss_s = s.get("cpu_percent", {}), s.get("rss_bytes", {})
+                lines.append(
+                    f"| {protocol} | {mode_title(mode)} | {', '.join(r['processes'])} | {num(cpu)} "
+                    f"| {_range(cpu_s, num)} | {times(cpu_ratio)} | {_range(cpu_s.get('vs_baseline'), _x)} "
+                    f"| {mib(rss)} | {times(rss_ratio)} | {_range(rss_s.get('vs_baseline'), _x)} |"
+                )
+            else:
+                lines.append(
+                    f"| {protocol} | {mode_title(mode)} | {', '.join(r['processes'])} | {num(cpu)} "
+                    f"| {times(cpu_ratio)} | {mib(rss)} | {times(rss_ratio)} |"
+                )
     return lines
+
+
+def repeats_note(summary: Mapping) -> list[str]:
+    """What the figures of repeated runs are (markdown lines); none for a single run of each mode."""
+    n = repeat_count(summary)
+    if n <= 1:
+        return []
+    return [
+        f"Each mode ran {n} times, interleaved: every mode once per round, then the next round. CPU and memory",
+        f"figures are the medians of the {n} runs (the reductions too, computed from them). Runs: the range of the",
+        "runs' CPU means. Per round: the range of each run's figure over the global map's run of the same round,",
+        "which shares the state of the machine. Map memory, accuracy, start, time per scan and the plots come from",
+        "each mode's first run.",
+        "",
+    ]
 
 
 def map_memory_split_table(summary: Mapping) -> list[str]:
@@ -67,6 +117,7 @@ def map_memory_split_table(summary: Mapping) -> list[str]:
 def headline_section(summary: Mapping) -> list[str]:
     """Both tables with what they count (markdown lines)."""
     lines = [
+        *repeats_note(summary),
         *resources_vs_global_table(summary),
         "",
         "The paper protocol counts the NDT localizer's nodelet manager alone in global-map mode, and the processes",
