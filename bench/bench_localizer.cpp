@@ -12,7 +12,8 @@
 //
 // Usage: bench_localizer INPUT.bin cloud|tiles|repeat|replay [--tile-size S] [--window N] [--threads T] [--resolution
 // R]
-//                        [--max-range M] [--trace FILE] [--tile-source DIR|URL] [--index-revision REV]
+//                        [--max-range M] [--max-step-size M] [--coarse-points N] [--trace FILE] [--tile-source DIR|URL]
+//                        [--index-revision REV]
 //                        [--map-store-cache DIR]
 // --trace writes one CSV row per scan (latency, NDT iterations, prediction and ground-truth errors, whether the
 // match was accepted and the pose published, the pose, the monotonic clock, whether the map store answers) to FILE.
@@ -235,7 +236,8 @@ int main(int argc, char** argv) {
     std::fprintf(
         stderr,
         "usage: %s INPUT.bin cloud|tiles|repeat|replay [--tile-size S] [--window N] [--threads T] [--resolution R] "
-        "[--max-range M] [--trace FILE] [--tile-source DIR|URL] [--index-revision REV] [--map-store-cache DIR]\n",
+        "[--max-range M] [--max-step-size M] [--coarse-points N] [--trace FILE] [--tile-source DIR|URL] "
+        "[--index-revision REV] [--map-store-cache DIR]\n",
         argv[0]);
     return 2;
   }
@@ -260,6 +262,10 @@ int main(int argc, char** argv) {
       threads = std::stoi(argv[i + 1]);
     else if (opt == "--resolution")
       config.ndt.resolution = std::stod(argv[i + 1]);
+    else if (opt == "--max-step-size")
+      config.ndt.max_step_size = std::stod(argv[i + 1]);
+    else if (opt == "--coarse-points")
+      config.ndt.coarse_points = std::stoi(argv[i + 1]);
     else if (opt == "--max-range")
       config.preprocess.max_range = std::stod(argv[i + 1]);
     else if (opt == "--trace")

@@ -26,11 +26,19 @@ const char* toString(NdtSearchMethod method);
 /// from VoxelMapParams, so an NdtConfig can be passed to NdtTarget as is.
 struct NdtConfig : VoxelMapParams {
   NdtSearchMethod search = NdtSearchMethod::DIRECT7;
-  double step_size = 0.1;                ///< maximum Newton step length (norm of the 6-vector, m and rad), > 0
+  double step_size = 0.1;  ///< maximum Newton step length (norm of the 6-vector, m and rad), > 0
+  /// >= step_size; while the line search ends at the step limit still going downhill, the limit doubles for the
+  /// next iteration, up to this (a trust region that grows where the local model holds); it falls back to
+  /// step_size after a step that stops short of the limit. Equal to step_size: PCL's fixed limit.
+  double max_step_size = 0.8;
   double transformation_epsilon = 0.01;  ///< converged when the step length falls below this, >= 0
   int max_iterations = 30;               ///< Newton iterations, >= 1
   double outlier_ratio = 0.55;           ///< weight of the uniform outlier term of the mixture, (0, 1)
   bool line_search = true;               ///< More-Thuente line search; false = fixed step min(|newton|, step_size)
+  /// >= 0; a source of at least twice this many points is first aligned as an even subsample of about this many
+  /// points against Gaussians twice as wide (a smoother cost with a wider basin), then in full from there: a guess
+  /// that is far off costs passes over the subsample instead of the scan. 0 = one stage.
+  int coarse_points = 1500;
 
   /// Empty when usable, else a message naming each bad value and its allowed range (includes the map params).
   std::string validate() const;
@@ -56,7 +64,8 @@ struct NdtResult {
   int iterations = 0;                                       ///< Newton iterations done
   /// Passes over the source computing cost, gradient and Hessian (the initial one and every line-search trial).
   int evaluations = 0;
-  bool converged = false;  ///< status == OK
+  int coarse_evaluations = 0;  ///< passes over the coarse stage's subsample (NdtConfig::coarse_points), 0 without one
+  bool converged = false;      ///< status == OK
   /// NDT cost: sum over source points and their Gaussians of d1 * exp(-d2/2 * mahalanobis^2), <= 0, lower is better.
   double score = 0.0;
   double transformation_probability = 0.0;  ///< -score / source points (Autoware's "transformation probability")
@@ -104,6 +113,9 @@ class NdtAligner {
   NdtDerivatives derivatives(const VoxelMap& target, const PointCloud& source, const Vector6d& pose) const;
 
  private:
+  /// The pose the coarse stage reaches from `guess` (NdtConfig::coarse_points), `guess` itself without one.
+  Vector6d coarseStage(const VoxelMap& target, const PointCloud& points, const Vector6d& guess, int* evaluations) const;
+
   NdtConfig config_;
 };
 

@@ -28,6 +28,9 @@
 namespace grid_puzzle_localization {
 namespace {
 
+// The coarse stage (NdtConfig::coarse_points) scores against Gaussians this many times as wide. Its minimum lies a few
+// centimetres from the fine one, which the full scan then reaches in one to three iterations.
+constexpr double kCoarseWidening = 2.0;
 constexpr int kChunk = 256;                   // points per accumulation chunk (fixed: makes the sum thread-count free)
 constexpr double kInlierChi2 = 11.345;        // chi2 with 3 dof at 99 %: Mahalanobis^2 bound of an inlier
 constexpr std::size_t kMinMatchedVoxels = 3;  // fewer distinct Gaussians cannot pin down 6 DoF reliably
@@ -129,7 +132,8 @@ void addDistinct(std::vector<const VoxelGaussian*>& set, const VoxelGaussian* g)
 
 class Evaluator {
  public:
-  Evaluator(const VoxelMap& map, const PointCloud& points, const NdtConfig& cfg)
+  /// `widening` >= 1 scales every Gaussian's standard deviation (d2 / widening^2): a smoother cost with a wider basin.
+  Evaluator(const VoxelMap& map, const PointCloud& points, const NdtConfig& cfg, double widening = 1.0)
       : map_(map),
         points_(points),
         offsets_(offsetsFor(cfg.search)),
@@ -139,7 +143,7 @@ class Evaluator {
         threads_(resolveThreads(cfg.threads)) {
     const GaussConstants g = gaussConstants(map.resolution(), cfg.outlier_ratio);
     d1_ = static_cast<float>(g.d1);
-    d2_ = static_cast<float>(g.d2);
+    d2_ = static_cast<float>(g.d2 / (widening * widening));
     chunks_.resize((points.size() + kChunk - 1) / kChunk);
   }
 
@@ -362,6 +366,78 @@ NdtResult failure(NdtResult r, NdtResultStatus status, const std::string& messag
   return r;
 }
 
+struct DescentResult {
+  int iterations = 0;
+  bool converged = false;
+};
+
+// Newton iterations with the line search from *p, where *D holds the derivatives, until the step falls below
+// `epsilon` at a positive definite Hessian or max_iterations; *p and *D end at the last iterate. Counts each pass
+// over the source in *evaluations.
+DescentResult descend(Evaluator& ev, const NdtConfig& config, double epsilon, Vector6d* p, NdtDerivatives* D,
+                      int* evaluations) {
+  auto evaluate = [&](const Vector6d& pose) {
+    ++*evaluations;
+    return ev.evaluate(pose, true);
+  };
+  DescentResult out;
+  double step_limit = config.step_size;
+  for (out.iterations = 0; out.iterations < config.max_iterations;) {
+    const Vector6d delta = newtonStep(*D);
+    const double norm = delta.norm();
+    if (!std::isfinite(norm)) break;
+    if (norm == 0.0) {
+      out.converged = true;
+      break;
+    }
+    Vector6d dir = delta / norm;
+    double slope = D->gradient.dot(dir);
+    if (slope > 0.0) {  // the Hessian is not positive definite here: go downhill along the flipped direction
+      dir = -dir;
+      slope = -slope;
+    }
+    ++out.iterations;
+    if (slope == 0.0) {
+      out.converged = true;
+      break;
+    }
+    // At a positive definite Hessian a Newton step shorter than transformation_epsilon lands on the minimum of the
+    // local quadratic model, and the cost decrease it brings (second order in the step) is below the round-off of
+    // the float sums and the jumps where points change voxels. A line search cannot measure it: it kept shrinking
+    // such a step for up to max_evaluations passes over the scan and then took almost none of it. Take it whole.
+    const bool newton_converged = norm < epsilon && isPositiveDefinite(D->hessian);
+    double step = 0.0;
+    if (config.line_search && !newton_converged) {
+      NdtDerivatives trial;
+      step = moreThuente(
+          [&](double a, double* value, double* deriv) {
+            trial = evaluate(*p + a * dir);
+            *value = trial.cost;
+            *deriv = trial.gradient.dot(dir);
+          },
+          D->cost, slope, norm, 0.0, step_limit);
+      *D = trial;
+    } else {
+      step = std::min(norm, step_limit);
+      *D = evaluate(*p + step * dir);
+    }
+    *p += step * dir;
+    // A line-searched step that reached the limit and still went downhill says the local model holds further out:
+    // allow twice as long a step next time (without a line search nothing checks a longer step, so it stays fixed).
+    // A shorter step found its minimum along the direction: back to the configured limit, so the last iterations
+    // near the optimum are as fine as ever.
+    const bool downhill_at_limit = config.line_search && step >= step_limit && D->gradient.dot(dir) < 0.0;
+    step_limit = downhill_at_limit ? std::min(2.0 * step_limit, config.max_step_size) : config.step_size;
+    // A short step alone is not convergence: DIRECT searches can stall on a saddle or a ridge of the piecewise-
+    // smooth cost, where the saddle-free step keeps going downhill. Require a positive definite Hessian too.
+    if (newton_converged || (step < epsilon && isPositiveDefinite(D->hessian))) {
+      out.converged = true;
+      break;
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 NdtAligner::NdtAligner(const NdtConfig& config) : config_(config) {
@@ -373,6 +449,23 @@ NdtDerivatives NdtAligner::derivatives(const VoxelMap& target, const PointCloud&
   const PointCloud pts = finitePoints(source);
   Evaluator ev(target, pts, config_);
   return ev.evaluate(pose, true);
+}
+
+Vector6d NdtAligner::coarseStage(const VoxelMap& target, const PointCloud& points, const Vector6d& guess,
+                                 int* evaluations) const {
+  const std::size_t n = points.size();
+  if (config_.coarse_points <= 0 || n < 2 * static_cast<std::size_t>(config_.coarse_points)) return guess;
+  const std::size_t stride = n / static_cast<std::size_t>(config_.coarse_points);
+  PointCloud sample;
+  sample.reserve(n / stride + 1);
+  for (std::size_t i = 0; i < n; i += stride) sample.push_back(points[i]);
+  Evaluator ev(target, sample, config_, kCoarseWidening);
+  Vector6d p = guess;
+  NdtDerivatives D = ev.evaluate(p, true);
+  ++*evaluations;
+  if (ev.lastMatched() == 0) return guess;
+  descend(ev, config_, config_.transformation_epsilon, &p, &D, evaluations);
+  return p.allFinite() ? p : guess;
 }
 
 NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, const Eigen::Matrix4f& guess) const {
@@ -396,65 +489,23 @@ NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, co
                    "the source has " + std::to_string(pts.size()) + " finite points, at least " +
                        std::to_string(kMinSourcePoints) + " are needed");
 
+  const Vector6d guess_pose = matrixToPose(guess.cast<double>());
+  Vector6d p = coarseStage(target, pts, guess_pose, &r.coarse_evaluations);
   Evaluator ev(target, pts, config_);
-  auto evaluate = [&](const Vector6d& pose) {
+  NdtDerivatives D = ev.evaluate(p, true);
+  ++r.evaluations;
+  if (ev.lastMatched() == 0 && p != guess_pose) {  // the coarse stage left every point behind: start as given
+    p = guess_pose;
+    D = ev.evaluate(p, true);
     ++r.evaluations;
-    return ev.evaluate(pose, true);
-  };
-  Vector6d p = matrixToPose(guess.cast<double>());
-  NdtDerivatives D = evaluate(p);
+  }
   if (ev.lastMatched() == 0)
     return failure(r, NdtResultStatus::NO_CORRESPONDENCE,
                    "no source point lies near a target voxel at the initial guess; check the guess and the map");
 
-  bool converged = false;
-  for (r.iterations = 0; r.iterations < config_.max_iterations;) {
-    const Vector6d delta = newtonStep(D);
-    const double norm = delta.norm();
-    if (!std::isfinite(norm)) break;
-    if (norm == 0.0) {
-      converged = true;
-      break;
-    }
-    Vector6d dir = delta / norm;
-    double slope = D.gradient.dot(dir);
-    if (slope > 0.0) {  // the Hessian is not positive definite here: go downhill along the flipped direction
-      dir = -dir;
-      slope = -slope;
-    }
-    ++r.iterations;
-    if (slope == 0.0) {
-      converged = true;
-      break;
-    }
-    // At a positive definite Hessian a Newton step shorter than transformation_epsilon lands on the minimum of the
-    // local quadratic model, and the cost decrease it brings (second order in the step) is below the round-off of
-    // the float sums and the jumps where points change voxels. A line search cannot measure it: it kept shrinking
-    // such a step for up to max_evaluations passes over the scan and then took almost none of it. Take it whole.
-    const bool newton_converged = norm < config_.transformation_epsilon && isPositiveDefinite(D.hessian);
-    double step = 0.0;
-    if (config_.line_search && !newton_converged) {
-      NdtDerivatives trial;
-      step = moreThuente(
-          [&](double a, double* value, double* deriv) {
-            trial = evaluate(p + a * dir);
-            *value = trial.cost;
-            *deriv = trial.gradient.dot(dir);
-          },
-          D.cost, slope, norm, 0.0, config_.step_size);
-      D = trial;
-    } else {
-      step = std::min(norm, config_.step_size);
-      D = evaluate(p + step * dir);
-    }
-    p += step * dir;
-    // A short step alone is not convergence: DIRECT searches can stall on a saddle or a ridge of the piecewise-
-    // smooth cost, where the saddle-free step keeps going downhill. Require a positive definite Hessian too.
-    if (newton_converged || (step < config_.transformation_epsilon && isPositiveDefinite(D.hessian))) {
-      converged = true;
-      break;
-    }
-  }
+  const DescentResult fine = descend(ev, config_, config_.transformation_epsilon, &p, &D, &r.evaluations);
+  r.iterations = fine.iterations;
+  const bool converged = fine.converged;
   if (!p.allFinite() || !D.hessian.allFinite())
     return failure(r, NdtResultStatus::DEGENERATE,
                    "the optimisation diverged to a non-finite pose; the guess is returned");

@@ -59,8 +59,11 @@ std::string NdtConfig::validate() const {
   std::ostringstream err;
   err << VoxelMapParams::validate();
   if (!(step_size > 0.0 && std::isfinite(step_size))) err << "step_size must be > 0 (got " << step_size << "); ";
+  if (!(max_step_size >= step_size && std::isfinite(max_step_size)))
+    err << "max_step_size must be >= step_size (" << step_size << ") (got " << max_step_size << "); ";
   if (!(transformation_epsilon >= 0.0))
     err << "transformation_epsilon must be >= 0 (got " << transformation_epsilon << "); ";
+  if (coarse_points < 0) err << "coarse_points must be >= 0 (got " << coarse_points << "); ";
   if (max_iterations < 1) err << "max_iterations must be >= 1 (got " << max_iterations << "); ";
   if (!(outlier_ratio > 0.0 && outlier_ratio < 1.0))
     err << "outlier_ratio must be in (0, 1) (got " << outlier_ratio << "); ";

@@ -133,6 +133,8 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
   load("ndt/eigenvalue_ratio", c.ndt.eigenvalue_ratio);
   load("ndt/threads", c.ndt.threads);
   load("ndt/step_size", c.ndt.step_size);
+  load("ndt/max_step_size", c.ndt.max_step_size);
+  load("ndt/coarse_points", c.ndt.coarse_points);
   load("ndt/transformation_epsilon", c.ndt.transformation_epsilon);
   load("ndt/max_iterations", c.ndt.max_iterations);
   load("ndt/outlier_ratio", c.ndt.outlier_ratio);

@@ -71,7 +71,8 @@ void set(gpl::GlobalLocalizationConfig* c, const std::string& assignment) {
                                                    {"max_refinement_shift", &c->max_refinement_shift},
                                                    {"ndt.resolution", &c->ndt.resolution},
                                                    {"ndt.transformation_epsilon", &c->ndt.transformation_epsilon},
-                                                   {"ndt.step_size", &c->ndt.step_size}};
+                                                   {"ndt.step_size", &c->ndt.step_size},
+                                                   {"ndt.max_step_size", &c->ndt.max_step_size}};
   const std::pair<const char*, int*> integers[] = {{"max_scan_points", &c->max_scan_points},
                                                    {"min_scan_points", &c->min_scan_points},
                                                    {"levels", &c->levels},

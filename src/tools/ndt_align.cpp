@@ -21,7 +21,7 @@ namespace {
 const char* kUsage =
     "usage: ndt_align TARGET.pcd SOURCE.pcd [--method DIRECT1|DIRECT7|DIRECT27|RADIUS] [--threads N]\n"
     "                 [--resolution R] [--voxel V] [--max-iterations N] [--epsilon E] [--step-size S]\n"
-    "                 [--guess x y z roll pitch yaw]\n"
+    "                 [--max-step-size M] [--guess x y z roll pitch yaw]\n"
     "Aligns SOURCE to TARGET (both x y z PCD files), prints T_target_source (4x4 and as\n"
     "pose [x y z roll pitch yaw], ROS convention) and diagnostics as JSON.\n"
     "  --method      neighbour search (default DIRECT7)\n"
@@ -76,6 +76,9 @@ Args parse(int argc, char** argv) {
       ++i;
     } else if (opt == "--step-size") {
       a.config.step_size = number(opt, value());
+      ++i;
+    } else if (opt == "--max-step-size") {
+      a.config.max_step_size = number(opt, value());
       ++i;
     } else if (opt == "--guess") {
       for (int k = 0; k < 6; ++k) a.guess(k) = number(opt, value(k + 1));

@@ -38,6 +38,40 @@ TEST(NdtRealPair, Direct7AndRadiusMatchTheReference) {
   }
 }
 
+// A guess 1.2 m and 4 deg off the reference, as a late or jittered scan between keyframes gives. The growing step
+// limit and the coarse stage must reach the same minimum as PCL's fixed 0.1 step on the full scan, with fewer passes
+// over the scan.
+TEST(NdtRealPair, FarGuessConvergesWithFewerPassesOverTheScan) {
+  const Eigen::Matrix4d ref = gpl::real_pair::reference();
+  Eigen::Affine3d off = Eigen::Translation3d(0.9, -0.8, 0.0) * Eigen::AngleAxisd(0.07, Eigen::Vector3d::UnitZ());
+  const Eigen::Matrix4f guess = (off.matrix() * ref).cast<float>();
+  gpl::NdtConfig fixed;
+  fixed.max_step_size = fixed.step_size;
+  fixed.coarse_points = 0;
+  gpl::NdtConfig growing = fixed;
+  growing.max_step_size = gpl::NdtConfig().max_step_size;
+  const gpl::NdtConfig defaults;
+  ASSERT_GT(gpl::real_pair::source().size(), 2u * static_cast<std::size_t>(defaults.coarse_points));
+  gpl::NdtTarget target(defaults);
+  target.setTarget(gpl::real_pair::target());
+  int passes[3];
+  const gpl::NdtConfig* configs[3] = {&fixed, &growing, &defaults};
+  for (int i = 0; i < 3; ++i) {
+    const gpl::NdtResult r = gpl::NdtAligner(*configs[i]).align(*target.snapshot(), gpl::real_pair::source(), guess);
+    ASSERT_EQ(r.status, gpl::NdtResultStatus::OK) << i << ": " << r.message;
+    const auto [te, re] = gpl::synthetic::poseError(ref, r.transform.cast<double>());
+    std::cout << "config " << i << ": " << r.iterations << " iterations, " << r.evaluations << " passes over the scan, "
+              << r.coarse_evaluations << " over the coarse subsample, error " << te << " m " << re << " deg"
+              << std::endl;
+    EXPECT_LT(te, 0.03) << i;
+    EXPECT_LT(re, 0.3) << i;
+    EXPECT_EQ(r.coarse_evaluations > 0, configs[i]->coarse_points > 0) << i;
+    passes[i] = r.evaluations;
+  }
+  EXPECT_LT(passes[1], passes[0]) << "the growing step limit";
+  EXPECT_LT(passes[2], passes[1]) << "the coarse stage";
+}
+
 TEST(NdtRealPair, PcdReaderAndPreprocessingGiveTheExpectedClouds) {
   // About 5k of the 69,088 target points lie at the origin (no return) and must be gone before the voxel filter.
   const gpl::PointCloud raw = gpl::readPcdXyz(gpl::real_pair::dataDir() + "/251370668.pcd");
