@@ -35,9 +35,11 @@ struct NdtConfig : VoxelMapParams {
   int max_iterations = 30;               ///< Newton iterations, >= 1
   double outlier_ratio = 0.55;           ///< weight of the uniform outlier term of the mixture, (0, 1)
   bool line_search = true;               ///< More-Thuente line search; false = fixed step min(|newton|, step_size)
-  /// >= 0; a source of at least twice this many points is first aligned as an even subsample of about this many
-  /// points against Gaussians twice as wide (a smoother cost with a wider basin), then in full from there: a guess
-  /// that is far off costs passes over the subsample instead of the scan. 0 = one stage.
+  /// >= 0; when the guess is not yet near a minimum (its Newton step is longer than step_size or the Hessian is not
+  /// positive definite), a source of at least twice this many points is first aligned as an even subsample of about
+  /// this many points against Gaussians twice as wide (a smoother cost with a wider basin), then in full from there
+  /// when the full scan scores that better than the guess: a guess that is far off costs passes over the subsample
+  /// instead of the scan. 0 = one stage.
   int coarse_points = 1500;
 
   /// Empty when usable, else a message naming each bad value and its allowed range (includes the map params).

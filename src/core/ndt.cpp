@@ -489,19 +489,29 @@ NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, co
                    "the source has " + std::to_string(pts.size()) + " finite points, at least " +
                        std::to_string(kMinSourcePoints) + " are needed");
 
-  const Vector6d guess_pose = matrixToPose(guess.cast<double>());
-  Vector6d p = coarseStage(target, pts, guess_pose, &r.coarse_evaluations);
   Evaluator ev(target, pts, config_);
+  Vector6d p = matrixToPose(guess.cast<double>());
   NdtDerivatives D = ev.evaluate(p, true);
   ++r.evaluations;
-  if (ev.lastMatched() == 0 && p != guess_pose) {  // the coarse stage left every point behind: start as given
-    p = guess_pose;
-    D = ev.evaluate(p, true);
-    ++r.evaluations;
-  }
   if (ev.lastMatched() == 0)
     return failure(r, NdtResultStatus::NO_CORRESPONDENCE,
                    "no source point lies near a target voxel at the initial guess; check the guess and the map");
+  // A guess whose Newton step fits within step_size at a positive definite Hessian is in the minimum's basin already
+  // (the common tracking case): the full scan converges from it in a pass or two, and a coarse stage would only add
+  // to that. A guess farther off goes through the coarse stage, whose answer is kept when the full scan scores it
+  // better than the guess.
+  const bool near_minimum = newtonStep(D).norm() <= config_.step_size && isPositiveDefinite(D.hessian);
+  if (!near_minimum) {
+    const Vector6d coarse = coarseStage(target, pts, p, &r.coarse_evaluations);
+    if (coarse != p) {
+      const NdtDerivatives Dc = ev.evaluate(coarse, true);
+      ++r.evaluations;
+      if (ev.lastMatched() > 0 && Dc.cost < D.cost) {
+        p = coarse;
+        D = Dc;
+      }
+    }
+  }
 
   const DescentResult fine = descend(ev, config_, config_.transformation_epsilon, &p, &D, &r.evaluations);
   r.iterations = fine.iterations;
