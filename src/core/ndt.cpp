@@ -372,10 +372,10 @@ struct DescentResult {
 };
 
 // Newton iterations with the line search from *p, where *D holds the derivatives, until the step falls below
-// `epsilon` at a positive definite Hessian or max_iterations; *p and *D end at the last iterate. Counts each pass
-// over the source in *evaluations.
-DescentResult descend(Evaluator& ev, const NdtConfig& config, double epsilon, Vector6d* p, NdtDerivatives* D,
-                      int* evaluations) {
+// transformation_epsilon at a positive definite Hessian or max_iterations; *p and *D end at the last iterate. Counts
+// each pass over the source in *evaluations.
+DescentResult descend(Evaluator& ev, const NdtConfig& config, Vector6d* p, NdtDerivatives* D, int* evaluations) {
+  const double epsilon = config.transformation_epsilon;
   auto evaluate = [&](const Vector6d& pose) {
     ++*evaluations;
     return ev.evaluate(pose, true);
@@ -464,7 +464,7 @@ Vector6d NdtAligner::coarseStage(const VoxelMap& target, const PointCloud& point
   NdtDerivatives D = ev.evaluate(p, true);
   ++*evaluations;
   if (ev.lastMatched() == 0) return guess;
-  descend(ev, config_, config_.transformation_epsilon, &p, &D, evaluations);
+  descend(ev, config_, &p, &D, evaluations);
   return p.allFinite() ? p : guess;
 }
 
@@ -513,7 +513,7 @@ NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, co
     }
   }
 
-  const DescentResult fine = descend(ev, config_, config_.transformation_epsilon, &p, &D, &r.evaluations);
+  const DescentResult fine = descend(ev, config_, &p, &D, &r.evaluations);
   r.iterations = fine.iterations;
   const bool converged = fine.converged;
   if (!p.allFinite() || !D.hessian.allFinite())
