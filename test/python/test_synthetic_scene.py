@@ -25,6 +25,19 @@ def test_rays_hit_ground_box_and_pole_at_closed_form_distances() -> None:
     assert np.isinf(t[4])
 
 
+def test_box_behind_the_origin_is_hit_across_the_azimuth_wrap() -> None:
+    """A box straddling azimuth +-pi (rays are culled by azimuth): rays just above and below pi hit its face."""
+    scene = ss.Scene(
+        boxes=np.array([[[-12.0, -2.0, 0.0], [-10.0, 2.0, 3.0]]]), poles=np.zeros((0, 4)), ground=(0, 0, 0, 0)
+    )
+    origin = np.array([0.0, 0.0, 1.5])
+    angles = np.array([np.pi - 0.1, -np.pi + 0.1, np.pi, 0.5 * np.pi])
+    dirs = np.column_stack([np.cos(angles), np.sin(angles), np.zeros(4)])
+    t = ss.raycast(scene, origin, dirs, max_range=100.0)
+    np.testing.assert_allclose(t[:3], 10.0 / np.abs(np.cos(angles[:3])))
+    assert np.isinf(t[3])
+
+
 def test_max_range_turns_far_hits_into_misses() -> None:
     t = ss.raycast(small_scene(), np.array([0.0, 0.0, 1.5]), np.array([[1.0, 0.0, 0.0]]), max_range=9.0)
     assert np.isinf(t[0])
