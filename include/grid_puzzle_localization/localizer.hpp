@@ -148,7 +148,7 @@ struct LocalizerOutput {
   /// lost.max_coast_time old and a gyro covers the time since.
   bool publish = false;
   double since_last_match = 0.0;     ///< [s] from the last accepted match (or initial pose) before this scan
-  int hypotheses = 0;                ///< extra alignments from the hypotheses on this scan
+  int hypotheses = 0;                ///< candidates the hypotheses tried on this scan (after a poor match)
   bool recovered = false;            ///< accepted after lost.max_coast_time without a match
   bool global_search = false;        ///< the branch-and-bound search ran on this scan
   std::string global_search_reason;  ///< why its answer was refused (empty when taken or not run)

@@ -3,6 +3,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <optional>
 #include <string>
 
 #include "grid_puzzle_localization/point_cloud.hpp"
@@ -113,6 +114,12 @@ class NdtAligner {
   /// The cost, gradient and Hessian that align() minimises, at `pose` (finite source points only). For tests and
   /// for a covariance at a pose found elsewhere.
   NdtDerivatives derivatives(const VoxelMap& target, const PointCloud& source, const Vector6d& pose) const;
+
+  /// Where the coarse stage alone leads from `guess` (T_target_source): passes over the subsample against the wider
+  /// Gaussians, none over the whole source. Empty when this source has no coarse stage (coarse_points = 0, fewer than
+  /// twice as many finite points, an empty target or one of another resolution).
+  std::optional<Eigen::Isometry3d> coarseAlign(const VoxelMap& target, const PointCloud& source,
+                                               const Eigen::Isometry3d& guess) const;
 
  private:
   /// The pose the coarse stage reaches from `guess` (NdtConfig::coarse_points), `guess` itself without one.

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <utility>
 
@@ -202,10 +203,25 @@ std::optional<NdtResult> Localizer::tryHypotheses(const Eigen::Isometry3d& guess
     for (const Eigen::Isometry3d& g : searchCandidates(around, screen))
       if (!g.isApprox(guess, 1e-9)) guesses.push_back(g);  // the prediction itself was matched already
   }
+  std::vector<Eigen::Isometry3d> starts = screenCandidates(aligner_, *target_, source_, guesses, screen);
+  out.hypotheses = static_cast<int>(starts.size());
+  // With a coarse stage, each candidate is aligned on the subsample only, the whole scan scores where each landed, and
+  // the best alone is aligned in full: one full alignment instead of one per candidate.
+  std::optional<Eigen::Isometry3d> best_start;
+  double best_cost = std::numeric_limits<double>::infinity();
+  for (const Eigen::Isometry3d& g : starts) {
+    const std::optional<Eigen::Isometry3d> coarse = aligner_.coarseAlign(*target_, source_, g);
+    if (!coarse) break;  // no coarse stage for this scan: every candidate is aligned in full
+    const double cost = aligner_.derivatives(*target_, source_, matrixToPose(coarse->matrix())).cost;
+    if (cost < best_cost) {
+      best_cost = cost;
+      best_start = coarse;
+    }
+  }
+  if (best_start) starts = {*best_start};
   std::optional<NdtResult> best;
-  for (const Eigen::Isometry3d& g : screenCandidates(aligner_, *target_, source_, guesses, screen)) {
+  for (const Eigen::Isometry3d& g : starts) {
     NdtResult r = aligner_.align(*target_, source_, g.cast<float>());
-    ++out.hypotheses;
     if (acceptable(r) && (!best || r.nvtl > best->nvtl)) best = std::move(r);
   }
   return best;

@@ -468,6 +468,16 @@ Vector6d NdtAligner::coarseStage(const VoxelMap& target, const PointCloud& point
   return p.allFinite() ? p : guess;
 }
 
+std::optional<Eigen::Isometry3d> NdtAligner::coarseAlign(const VoxelMap& target, const PointCloud& source,
+                                                         const Eigen::Isometry3d& guess) const {
+  const PointCloud pts = finitePoints(source);
+  if (config_.coarse_points <= 0 || pts.size() < 2 * static_cast<std::size_t>(config_.coarse_points) ||
+      target.resolution() != config_.resolution || target.gaussianCount() == 0 || !guess.matrix().allFinite())
+    return std::nullopt;
+  int evaluations = 0;
+  return Eigen::Isometry3d(poseToMatrix(coarseStage(target, pts, matrixToPose(guess.matrix()), &evaluations)));
+}
+
 NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, const Eigen::Matrix4f& guess) const {
   NdtResult r;
   const PointCloud pts = finitePoints(source);

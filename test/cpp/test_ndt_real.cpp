@@ -72,6 +72,28 @@ TEST(NdtRealPair, FarGuessConvergesWithFewerPassesOverTheScan) {
   EXPECT_LT(passes[2], passes[1]) << "the coarse stage";
 }
 
+// coarseAlign: the subsample alone brings the far guess of FarGuessConvergesWithFewerPassesOverTheScan to within a few
+// decimetres of the reference, and there is none without a coarse stage.
+TEST(NdtRealPair, CoarseAlignLandsNearTheMinimum) {
+  const Eigen::Matrix4d ref = gpl::real_pair::reference();
+  Eigen::Affine3d off = Eigen::Translation3d(0.9, -0.8, 0.0) * Eigen::AngleAxisd(0.07, Eigen::Vector3d::UnitZ());
+  const Eigen::Isometry3d guess(off.matrix() * ref);
+  gpl::NdtConfig cfg;
+  gpl::NdtTarget target(cfg);
+  target.setTarget(gpl::real_pair::target());
+  const std::optional<Eigen::Isometry3d> coarse =
+      gpl::NdtAligner(cfg).coarseAlign(*target.snapshot(), gpl::real_pair::source(), guess);
+  ASSERT_TRUE(coarse.has_value());
+  const auto [te_guess, re_guess] = gpl::synthetic::poseError(ref, guess.matrix());
+  const auto [te, re] = gpl::synthetic::poseError(ref, coarse->matrix());
+  std::cout << "coarse stage alone: " << te_guess << " m " << re_guess << " deg -> " << te << " m " << re << " deg"
+            << std::endl;
+  EXPECT_LT(te, 0.3);
+  EXPECT_LT(re, 1.0);
+  cfg.coarse_points = 0;
+  EXPECT_FALSE(gpl::NdtAligner(cfg).coarseAlign(*target.snapshot(), gpl::real_pair::source(), guess).has_value());
+}
+
 TEST(NdtRealPair, PcdReaderAndPreprocessingGiveTheExpectedClouds) {
   // About 5k of the 69,088 target points lie at the origin (no return) and must be gone before the voxel filter.
   const gpl::PointCloud raw = gpl::readPcdXyz(gpl::real_pair::dataDir() + "/251370668.pcd");

@@ -1,7 +1,7 @@
 """The localizer's per-scan times, as the experiment's recorder writes them (``OUT/<mode>/scan_times.csv``):
 one row per scan with its stamp [s], the whole scan's time and the matching's [ms] (NdtStatus
 ``scan_time_ms`` and ``align_time_ms``), whether its match was accepted (``match_accepted``, 1 or 0), and what the
-match did: its NDT iterations, the extra alignments of the hypotheses, whether the branch-and-bound search ran, and
+match did: its NDT iterations, the candidates the hypotheses tried, whether the branch-and-bound search ran, and
 the NVTL of the match taken (``iterations``, ``hypotheses``, ``global_search``, ``nvtl``). Tables written before
 the later columns existed are read too; the columns they lack are NaN (unknown)."""
 

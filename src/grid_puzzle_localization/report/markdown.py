@@ -342,7 +342,7 @@ def render_report(summary: Mapping) -> str:
         "",
         "The localizer's own time for each scan (NdtStatus scan_time_ms): preprocessing, the NDT match with any",
         "hypotheses or search, and the sliding window's update when fusion is on. The scans that took more than",
-        f"{SLOW_OVER_MEDIAN:g} times the median: how many ran the hypotheses (extra alignments after a poor match) or",
+        f"{SLOW_OVER_MEDIAN:g} times the median: how many ran the hypotheses (candidates tried after a poor match) or",
         "the search, and their NDT iterations against every scan's.",
         "",
         "## Storage",
