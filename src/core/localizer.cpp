@@ -37,6 +37,11 @@ Eigen::Isometry3d toIsometry(const Eigen::Matrix4f& m) {
   return out;
 }
 
+// Right after a start or a recovery no velocity is measured. When the motion bound keeps the scan within this many
+// NDT voxels of the last accepted pose (the coarse stage's basin, with a margin), the match from that pose is tried
+// before the branch-and-bound search: 0.2 s after a start at the default max_speed the bound is 4 m.
+constexpr double kHeldMatchReachVoxels = 4.0;
+
 // Two matches land on different poses: farther apart than `distance` [m], or turned by more than 0.1 rad.
 bool distinct(const NdtResult& a, const NdtResult& b, double distance) {
   const Eigen::Isometry3d pa = toIsometry(a.transform), pb = toIsometry(b.transform);
@@ -372,6 +377,16 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
       if (alternative && (!better_elsewhere || !poor(*alternative))) consider(std::move(alternative));
     }
   }
+  // Before a velocity is measured (the scans after a start or a recovery) the match from the last accepted pose is
+  // taken when it fits as well as the track did and the motion bound keeps the scan within the NDT's reach of that
+  // pose; the search runs when it does not (a scene that fits many places, a fast start, scans far apart).
+  const bool held_first = !fresh && !velocity_trusted && elapsed >= 0.0 &&
+                          elapsed <= config_.prediction.max_extrapolation &&
+                          region.radius <= kHeldMatchReachVoxels * config_.ndt.resolution;
+  if (held_first) {
+    out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
+    if (!poor(out.ndt)) consider(out.ndt);
+  }
   // No trusted prediction (start-up, a gap, a loss) or nothing fitted from it: the branch-and-bound search of the
   // bounded region (every yaw after a gap when the rotation is not known), at most once per search_period. A given
   // pose that the scan does not fit is wrong: once the map held reaches around it, the square of
@@ -400,10 +415,10 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
       found_globally = g.map_T_base;
     }
   }
-  if (!best && !fresh && !velocity_trusted && !long_gap && elapsed >= 0.0) {
-    // Before a velocity is measured (the scans after a start or a recovery) the search decides. When it refuses a
-    // scene as ambiguous (a tunnel fits many places along itself), the match from the last accepted pose is still
-    // tried, and taken when it fits as well as the track did.
+  if (!best && !held_first && !fresh && !velocity_trusted && !long_gap && elapsed >= 0.0) {
+    // Farther than the NDT's reach the search decides. When it refuses a scene as ambiguous (a tunnel fits many places
+    // along itself), the match from the last accepted pose is still tried, and taken when it fits as well as the
+    // track did.
     out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
     if (!poor(out.ndt)) consider(out.ndt);
   }
