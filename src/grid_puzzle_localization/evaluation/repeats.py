@@ -42,7 +42,8 @@ def median_resources(per_repeat: Sequence[Mapping]) -> dict:
     return out
 
 
-def _ratio(value: float | None, baseline: float | None) -> float | None:
+def ratio(value: float | None, baseline: float | None) -> float | None:
+    """``value`` over ``baseline``; None when either is missing or the baseline is not positive."""
     return value / baseline if value is not None and baseline is not None and baseline > 0 else None
 
 
@@ -61,7 +62,7 @@ def repeat_spread(per_repeat: Mapping[str, Sequence[Mapping]], baseline: str) ->
                 entry[metric] = {"means": means, **value_range(means)}
                 if base is not None:
                     bases = [b[protocol][metric]["mean"] for b in base]
-                    ratios = [_ratio(v, b) for v, b in zip_equal(means, bases)]
+                    ratios = [ratio(v, b) for v, b in zip_equal(means, bases)]
                     entry[metric]["vs_baseline"] = {"per_repeat": ratios, **value_range(ratios)}
             out[mode][protocol] = entry
     return out

@@ -25,11 +25,6 @@ def mib(value: float | None) -> str:
     return num(None if value is None else value / MIB, ".1f")
 
 
-def ratio(value: float | None, baseline: float | None) -> float | None:
-    """``value`` over ``baseline``; None when either is missing or the baseline is not positive."""
-    return value / baseline if value is not None and baseline is not None and baseline > 0 else None
-
-
 def times(value: float | None) -> str:
     """A ratio as "0.42 x"."""
     return num(value, ".2f", " x")

@@ -6,9 +6,10 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from grid_puzzle_localization.evaluation.repeats import ratio
 from grid_puzzle_localization.evaluation.resources import PROTOCOLS
 from grid_puzzle_localization.experiment.modes import GRID_PUZZLE_MODES
-from grid_puzzle_localization.report.format import mib, mode_title, num, ratio, times
+from grid_puzzle_localization.report.format import mib, mode_title, num, times
 
 
 def headline_modes(summary: Mapping) -> list[str]:
