@@ -122,6 +122,8 @@ class NdtAligner {
                                                const Eigen::Isometry3d& guess) const;
 
  private:
+  /// A source of `points` finite points gets a coarse stage (NdtConfig::coarse_points).
+  bool hasCoarseStage(std::size_t points) const;
   /// The pose the coarse stage reaches from `guess` (NdtConfig::coarse_points), `guess` itself without one.
   Vector6d coarseStage(const VoxelMap& target, const PointCloud& points, const Vector6d& guess, int* evaluations) const;
 

@@ -380,9 +380,9 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   // Before a velocity is measured (the scans after a start or a recovery) the match from the last accepted pose is
   // taken when it fits as well as the track did and the motion bound keeps the scan within the NDT's reach of that
   // pose; the search runs when it does not (a scene that fits many places, a fast start, scans far apart).
-  const bool held_first = !fresh && !velocity_trusted && elapsed >= 0.0 &&
-                          elapsed <= config_.prediction.max_extrapolation &&
-                          region.radius <= kHeldMatchReachVoxels * config_.ndt.resolution;
+  const bool long_gap = !fresh && elapsed > config_.prediction.max_extrapolation;
+  const bool velocity_unmeasured = !fresh && !velocity_trusted && !long_gap && elapsed >= 0.0;
+  const bool held_first = velocity_unmeasured && region.radius <= kHeldMatchReachVoxels * config_.ndt.resolution;
   if (held_first) {
     out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
     if (!poor(out.ndt)) consider(out.ndt);
@@ -392,7 +392,6 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   // pose that the scan does not fit is wrong: once the map held reaches around it, the square of
   // lost/initial_pose_search_size around it is searched at once, every yaw.
   const bool map_loading = out.map_update_pending || worker_.busy();
-  const bool long_gap = !fresh && elapsed > config_.prediction.max_extrapolation;
   const bool search_due = !long_gap || !last_global_search_ ||
                           stamp - *last_global_search_ >= config_.lost.search_period || stamp < *last_global_search_;
   std::optional<Eigen::Isometry3d> found_globally;
@@ -415,7 +414,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
       found_globally = g.map_T_base;
     }
   }
-  if (!best && !held_first && !fresh && !velocity_trusted && !long_gap && elapsed >= 0.0) {
+  if (!best && velocity_unmeasured && !held_first) {
     // Farther than the NDT's reach the search decides. When it refuses a scene as ambiguous (a tunnel fits many places
     // along itself), the match from the last accepted pose is still tried, and taken when it fits as well as the
     // track did.

@@ -451,10 +451,14 @@ NdtDerivatives NdtAligner::derivatives(const VoxelMap& target, const PointCloud&
   return ev.evaluate(pose, true);
 }
 
+bool NdtAligner::hasCoarseStage(std::size_t points) const {
+  return config_.coarse_points > 0 && points >= 2 * static_cast<std::size_t>(config_.coarse_points);
+}
+
 Vector6d NdtAligner::coarseStage(const VoxelMap& target, const PointCloud& points, const Vector6d& guess,
                                  int* evaluations) const {
   const std::size_t n = points.size();
-  if (config_.coarse_points <= 0 || n < 2 * static_cast<std::size_t>(config_.coarse_points)) return guess;
+  if (!hasCoarseStage(n)) return guess;
   const std::size_t stride = n / static_cast<std::size_t>(config_.coarse_points);
   PointCloud sample;
   sample.reserve(n / stride + 1);
@@ -471,8 +475,8 @@ Vector6d NdtAligner::coarseStage(const VoxelMap& target, const PointCloud& point
 std::optional<Eigen::Isometry3d> NdtAligner::coarseAlign(const VoxelMap& target, const PointCloud& source,
                                                          const Eigen::Isometry3d& guess) const {
   const PointCloud pts = finitePoints(source);
-  if (config_.coarse_points <= 0 || pts.size() < 2 * static_cast<std::size_t>(config_.coarse_points) ||
-      target.resolution() != config_.resolution || target.gaussianCount() == 0 || !guess.matrix().allFinite())
+  if (!hasCoarseStage(pts.size()) || target.resolution() != config_.resolution || target.gaussianCount() == 0 ||
+      !guess.matrix().allFinite())
     return std::nullopt;
   int evaluations = 0;
   return Eigen::Isometry3d(poseToMatrix(coarseStage(target, pts, matrixToPose(guess.matrix()), &evaluations)));
