@@ -438,6 +438,24 @@ namespace {
 // kTrimPeriod, also when it goes idle with freed memory not yet handed back.
 constexpr auto kTrimPeriod = std::chrono::seconds(2);
 
+// malloc_trim hands back free pages inside an arena's heap but never the top of a thread's own arena (the
+// worker's), and glibc's dynamic thresholds let that top keep up to twice the largest block it has freed: a whole
+// retired map, seen on a busy machine. Fixed thresholds bound it: blocks of kHeapBlockLimit or more are mapped
+// apart and go back when freed, and a free leaving more than that at an arena's top trims it. The per-scan cost
+// (64-beam KITTI-00 scans through bench_localizer) is within the repeat noise. The setting is the process's, made
+// once, by the first worker.
+constexpr int kHeapBlockLimit = 1 << 20;
+
+void pinHeapThresholds() {
+#if defined(__GLIBC__)
+  static std::once_flag once;
+  std::call_once(once, [] {
+    mallopt(M_MMAP_THRESHOLD, kHeapBlockLimit);
+    mallopt(M_TRIM_THRESHOLD, kHeapBlockLimit);
+  });
+#endif
+}
+
 // When the worker hands freed heap back to the system: right after the first change, then at most once per
 // kTrimPeriod.
 class HeapTrimmer {
@@ -470,6 +488,7 @@ void MapUpdateWorker::run() {
   const int nice = getpriority(PRIO_PROCESS, tid);
   if (errno == 0) static_cast<void>(setpriority(PRIO_PROCESS, tid, std::min(19, nice + kWorkerNiceIncrement)));
 #endif
+  pinHeapThresholds();
   NdtTarget target(params_);
   std::unique_lock<std::mutex> lock(mutex_);
   HeapTrimmer trimmer;
