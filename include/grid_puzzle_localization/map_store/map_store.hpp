@@ -3,6 +3,8 @@
 // concurrently over kept-alive connections with timeouts and bounded retries, checks every tile against the index
 // (size, SHA-256) before it is stored or used, and keeps them in a bounded LRU disk cache (atomic writes, kept across
 // restarts). Tiles are then read from the cache like a local tile directory. No ROS. See docs/map_store.md.
+// The store's work (libcurl, OpenSSL) lives in a library of its own that the first MapStore loads: a localizer on a
+// local map never maps libcurl's TLS stack, about 5 MiB of resident memory.
 #pragma once
 
 #include <cstddef>
@@ -14,6 +16,9 @@
 #include "grid_puzzle_localization/provider/tile_directory.hpp"
 
 namespace grid_puzzle_localization {
+namespace map_store_detail {
+class Backend;
+}  // namespace map_store_detail
 
 /// The map store's settings; the parameter names are the field names under `map_store/`.
 struct MapStoreConfig {
@@ -61,7 +66,8 @@ struct FetchedTile {
   std::string error;  ///< names the tile's URL and what failed; "" on success
 };
 
-/// Lowercase hex SHA-256 of `bytes` (OpenSSL EVP): the checksum index.json gives each tile.
+/// Lowercase hex SHA-256 of `bytes` (OpenSSL EVP): the checksum index.json gives each tile. Defined in the map store's
+/// own library (lib<package>_map_store, link it to call this), not in the core.
 std::string sha256Hex(const std::string& bytes);
 
 /// True for "http://..." and "https://...": where a tile directory is accepted, such a string names a map store.
@@ -103,8 +109,7 @@ class MapStore {
   MapStoreStatus status() const;
 
  private:
-  struct Impl;
-  std::unique_ptr<Impl> impl_;
+  std::unique_ptr<map_store_detail::Backend> backend_;
 };
 
 }  // namespace grid_puzzle_localization

@@ -11,6 +11,7 @@
 
 #include "disk_cache.hpp"
 #include "http_client.hpp"
+#include "map_store_backend.hpp"
 
 namespace grid_puzzle_localization {
 
@@ -26,13 +27,11 @@ namespace {
 
 constexpr const char* kIndexFile = "index.json";
 
-bool startsWith(const std::string& s, const char* prefix) { return s.rfind(prefix, 0) == 0; }
-
 // The URL without a trailing '/', or std::invalid_argument saying what is wrong with it.
 std::string checkedUrl(const std::string& url) {
   const auto bad = [&](const std::string& why) { return std::invalid_argument("map store URL '" + url + "': " + why); };
   const std::size_t scheme_end = url.find("://");
-  if (!startsWith(url, "http://") && !startsWith(url, "https://")) throw bad("only http:// and https:// are supported");
+  if (!isMapStoreUrl(url)) throw bad("only http:// and https:// are supported");
   for (const char c : url)
     if (static_cast<unsigned char>(c) <= ' ' || c == 0x7f) throw bad("it holds white space or control characters");
   if (url.find_first_of("?#") != std::string::npos)
@@ -61,39 +60,8 @@ bool retryable(const HttpResult& r) {
   return r.status == 408 || r.status == 429 || r.status >= 500;
 }
 
-}  // namespace
-
-bool isMapStoreUrl(const std::string& location) {
-  return startsWith(location, "http://") || startsWith(location, "https://");
-}
-
-std::string unsafeTileName(const std::string& name) {
-  if (name.empty()) return "an empty name";
-  if (name.size() > 255) return "longer than 255 bytes";
-  if (name == "." || name == ".." || name.find("..") != std::string::npos) return "it holds '..'";
-  if (name.front() == '.') return "it starts with '.'";
-  for (const char c : name) {
-    if (c == '/' || c == '\\') return "it holds a path separator";
-    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) return "it holds a control character";
-    if (c == '%' || c == '?' || c == '#') return "it holds '%', '?' or '#'";
-  }
-  return "";
-}
-
-std::string MapStoreConfig::validate() const {
-  if (!(cache_max_bytes > 0)) return "map_store/cache_max_bytes must be > 0";
-  if (!(connect_timeout > 0.0 && std::isfinite(connect_timeout))) return "map_store/connect_timeout must be > 0 s";
-  if (!(transfer_timeout > 0.0 && std::isfinite(transfer_timeout))) return "map_store/transfer_timeout must be > 0 s";
-  if (max_retries < 0 || max_retries > 20) return "map_store/max_retries must be in [0, 20]";
-  if (!(retry_backoff >= 0.0 && retry_backoff <= 60.0)) return "map_store/retry_backoff must be in [0, 60] s";
-  if (max_connections < 1 || max_connections > 64) return "map_store/max_connections must be in [1, 64]";
-  if (max_tile_bytes == 0) return "map_store/max_tile_bytes must be > 0";
-  if (max_index_bytes == 0) return "map_store/max_index_bytes must be > 0";
-  if (!(poll_period > 0.0 && std::isfinite(poll_period))) return "map_store/poll_period must be > 0 s";
-  return "";
-}
-
-struct MapStore::Impl {
+// The state of one store.
+struct StoreState {
   std::string url;
   MapStoreConfig config;
   std::string dir;  // this URL's cache directory
@@ -220,8 +188,26 @@ struct MapStore::Impl {
   }
 };
 
-MapStore::MapStore(const std::string& url, MapStoreConfig config) : impl_(std::make_unique<Impl>()) {
-  Impl& m = *impl_;
+// The store over libcurl: what MapStore forwards to.
+class HttpMapStore final : public map_store_detail::Backend {
+ public:
+  HttpMapStore(const std::string& url, const MapStoreConfig& config);
+  bool pollIndex() override { return m.poll(false); }
+  std::vector<FetchedTile> fetch(const std::vector<std::string>& ids) override;
+  const std::string& url() const override { return m.url; }
+  const TileIndexListing& index() const override { return m.index; }
+  std::string indexPath() const override { return m.dir + "/" + kIndexFile; }
+  std::string cacheDirectory() const override { return m.dir; }
+  MapStoreStatus status() const override {
+    std::lock_guard<std::mutex> lock(m.status_mutex);
+    return m.status;
+  }
+
+ private:
+  StoreState m;
+};
+
+HttpMapStore::HttpMapStore(const std::string& url, const MapStoreConfig& config) {
   m.url = checkedUrl(url);
   const std::string problem = config.validate();
   if (!problem.empty()) throw std::invalid_argument("map store " + m.url + ": " + problem);
@@ -259,12 +245,7 @@ MapStore::MapStore(const std::string& url, MapStoreConfig config) : impl_(std::m
                                 ": its index lists no tiles; re-run `gpm tile` on a non-empty map");
 }
 
-MapStore::~MapStore() = default;
-
-bool MapStore::pollIndex() { return impl_->poll(false); }
-
-std::vector<FetchedTile> MapStore::fetch(const std::vector<std::string>& ids) {
-  Impl& m = *impl_;
+std::vector<FetchedTile> HttpMapStore::fetch(const std::vector<std::string>& ids) {
   m.tiles->unpinAll();
   std::vector<FetchedTile> out(ids.size());
   std::vector<std::size_t> missing;  // positions in `out` to download
@@ -288,7 +269,7 @@ std::vector<FetchedTile> MapStore::fetch(const std::vector<std::string>& ids) {
     const std::string name = m.cacheName(entry);
     std::string bytes;
     if (m.tiles->touch(name)) {
-      if (readWholeFile(m.tiles->pathOf(name), bytes) && Impl::mismatch(entry, bytes).empty()) {
+      if (readWholeFile(m.tiles->pathOf(name), bytes) && StoreState::mismatch(entry, bytes).empty()) {
         t.path = m.tiles->pathOf(name);
         m.tiles->pin(name);
         std::lock_guard<std::mutex> lock(m.status_mutex);
@@ -321,10 +302,10 @@ std::vector<FetchedTile> MapStore::fetch(const std::vector<std::string>& ids) {
       if (res.too_large) {
         why = "larger than the index's " + std::to_string(entry.bytes) + " bytes; refused before it was stored";
       } else if (!res.transferred || res.status != 200) {
-        why = Impl::describe(res);
+        why = StoreState::describe(res);
         retry = retryable(res);
       } else {
-        why = Impl::mismatch(entry, res.body);
+        why = StoreState::mismatch(entry, res.body);
         retry = !why.empty();  // a CDN edge may serve a stale copy for a moment
       }
       if (why.empty()) {
@@ -355,14 +336,11 @@ std::vector<FetchedTile> MapStore::fetch(const std::vector<std::string>& ids) {
   return out;
 }
 
-const std::string& MapStore::url() const { return impl_->url; }
-const TileIndexListing& MapStore::index() const { return impl_->index; }
-std::string MapStore::indexPath() const { return impl_->dir + "/" + kIndexFile; }
-std::string MapStore::cacheDirectory() const { return impl_->dir; }
-
-MapStoreStatus MapStore::status() const {
-  std::lock_guard<std::mutex> lock(impl_->status_mutex);
-  return impl_->status;
-}
+}  // namespace
 
 }  // namespace grid_puzzle_localization
+
+extern "C" grid_puzzle_localization::map_store_detail::Backend* gpl_open_map_store(
+    const std::string& url, const grid_puzzle_localization::MapStoreConfig& config) {
+  return new grid_puzzle_localization::HttpMapStore(url, config);
+}
