@@ -22,7 +22,8 @@ bool startsWith(const std::string& s, const char* prefix) { return s.rfind(prefi
 OpenFunction loadMapStoreLibrary() {
   std::string path = GPL_MAP_STORE_LIBRARY;
   Dl_info self{};
-  if (dladdr(reinterpret_cast<void*>(&isMapStoreUrl), &self) != 0 && self.dli_fname != nullptr) {
+  // This function's own address (internal linkage: never an executable's stub) names the core's library file.
+  if (dladdr(reinterpret_cast<void*>(&loadMapStoreLibrary), &self) != 0 && self.dli_fname != nullptr) {
     const std::string core = self.dli_fname;
     const std::size_t slash = core.rfind('/');
     if (slash != std::string::npos) path = core.substr(0, slash + 1) + GPL_MAP_STORE_LIBRARY;
