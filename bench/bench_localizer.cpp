@@ -12,8 +12,8 @@
 //
 // Usage: bench_localizer INPUT.bin cloud|tiles|repeat|replay [--tile-size S] [--window N] [--threads T] [--resolution
 // R]
-//                        [--max-range M] [--max-step-size M] [--coarse-points N] [--trace FILE] [--tile-source DIR|URL]
-//                        [--index-revision REV]
+//                        [--max-range M] [--max-step-size M] [--coarse-points N] [--coarse-yaw-probe RAD]
+//                        [--trace FILE] [--tile-source DIR|URL] [--index-revision REV]
 //                        [--map-store-cache DIR]
 // --trace writes one CSV row per scan (latency, NDT iterations, prediction and ground-truth errors, whether the
 // match was accepted and the pose published, the pose, the monotonic clock, whether the map store answers) to FILE.
@@ -236,8 +236,8 @@ int main(int argc, char** argv) {
     std::fprintf(
         stderr,
         "usage: %s INPUT.bin cloud|tiles|repeat|replay [--tile-size S] [--window N] [--threads T] [--resolution R] "
-        "[--max-range M] [--max-step-size M] [--coarse-points N] [--trace FILE] [--tile-source DIR|URL] "
-        "[--index-revision REV] [--map-store-cache DIR]\n",
+        "[--max-range M] [--max-step-size M] [--coarse-points N] [--coarse-yaw-probe RAD] [--trace FILE] "
+        "[--tile-source DIR|URL] [--index-revision REV] [--map-store-cache DIR]\n",
         argv[0]);
     return 2;
   }
@@ -266,6 +266,10 @@ int main(int argc, char** argv) {
       config.ndt.max_step_size = std::stod(argv[i + 1]);
     else if (opt == "--coarse-points")
       config.ndt.coarse_points = std::stoi(argv[i + 1]);
+    else if (opt == "--coarse-yaw-probe")
+      config.ndt.coarse_yaw_probe = std::stod(argv[i + 1]);
+    else if (opt == "--coarse-yaw-probe")
+      config.ndt.coarse_yaw_probe = std::stod(argv[i + 1]);
     else if (opt == "--max-range")
       config.preprocess.max_range = std::stod(argv[i + 1]);
     else if (opt == "--trace")
@@ -349,10 +353,10 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "bench_localizer: cannot write the trace file %s\n", trace_path.c_str());
       return 2;
     }
-    trace << "scan,stamp_s,scan_ms,align_ms,cpu_ms,iterations,evaluations,source_points,update_pending,"
-             "prediction_to_match_m,prediction_to_match_rad,prediction_error_m,prediction_error_rad,error_m,error_rad,"
-             "truth_yaw_rate_rad_s,accepted,published,hypotheses,global_search,nvtl,global_search_reason,x,y,yaw,"
-             "monotonic_s,map_store_reachable\n";
+    trace << "scan,stamp_s,scan_ms,align_ms,cpu_ms,iterations,evaluations,coarse_evaluations,source_points,"
+             "update_pending,prediction_to_match_m,prediction_to_match_rad,prediction_error_m,prediction_error_rad,"
+             "error_m,error_rad,truth_yaw_rate_rad_s,accepted,published,hypotheses,global_search,nvtl,"
+             "global_search_reason,x,y,yaw,monotonic_s,map_store_reachable\n";
   }
   // latency_loading: scans that overlapped a target update and ran no branch-and-bound search (a search, e.g. on
   // the first scan without a measured velocity, costs tens of ms whatever the map does).
@@ -403,7 +407,8 @@ int main(int argc, char** argv) {
       std::replace(reason.begin(), reason.end(), '"', '\'');
       trace << i << ',' << std::fixed << std::setprecision(3) << scan.stamp << std::defaultfloat << ',' << out.scan_ms
             << ',' << out.align_ms << ',' << cpu_ms << ',' << out.ndt.iterations << ',' << out.ndt.evaluations << ','
-            << out.ndt.source_points << ',' << (out.map_update_pending || out.map_swapped) << ','
+            << out.ndt.coarse_evaluations << ',' << out.ndt.source_points << ','
+            << (out.map_update_pending || out.map_swapped) << ','
             << (out.prediction.translation() - out.pose.translation()).norm() << ','
             << rotationAngle(out.prediction, out.pose) << ','
             << (out.prediction.translation() - scan.truth.translation()).norm() << ','

@@ -42,6 +42,10 @@ struct NdtConfig : VoxelMapParams {
   /// when the full scan scores that better than the guess: a guess that is far off costs passes over the subsample
   /// instead of the scan. 0 = one stage.
   int coarse_points = 1500;
+  /// [rad] in [0, pi); the coarse stage starts from the best (by its cost) of the guess and the guess turned this far
+  /// either way about its z axis. A vehicle entering a turn between keyframes is predicted 0.15-0.25 rad off in yaw,
+  /// and from there the coarse cost descends into a false basin that keeps the old heading. 0 = from the guess only.
+  double coarse_yaw_probe = 0.1;
 
   /// Empty when usable, else a message naming each bad value and its allowed range (includes the map params).
   std::string validate() const;

@@ -468,6 +468,18 @@ Vector6d NdtAligner::coarseStage(const VoxelMap& target, const PointCloud& point
   NdtDerivatives D = ev.evaluate(p, true);
   ++*evaluations;
   if (ev.lastMatched() == 0) return guess;
+  // NdtConfig::coarse_yaw_probe: also the guess turned either way; the descent starts from the best of the three.
+  for (const double yaw : {config_.coarse_yaw_probe, -config_.coarse_yaw_probe}) {
+    if (yaw == 0.0) break;
+    Vector6d start = guess;
+    start(5) += yaw;
+    const NdtDerivatives Ds = ev.evaluate(start, true);
+    ++*evaluations;
+    if (ev.lastMatched() > 0 && Ds.cost < D.cost) {
+      p = start;
+      D = Ds;
+    }
+  }
   descend(ev, config_, &p, &D, evaluations);
   return p.allFinite() ? p : guess;
 }

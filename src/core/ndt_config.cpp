@@ -64,6 +64,8 @@ std::string NdtConfig::validate() const {
   if (!(transformation_epsilon >= 0.0))
     err << "transformation_epsilon must be >= 0 (got " << transformation_epsilon << "); ";
   if (coarse_points < 0) err << "coarse_points must be >= 0 (got " << coarse_points << "); ";
+  if (!(coarse_yaw_probe >= 0.0 && coarse_yaw_probe < M_PI))
+    err << "coarse_yaw_probe must be in [0, pi) rad (got " << coarse_yaw_probe << "); ";
   if (max_iterations < 1) err << "max_iterations must be >= 1 (got " << max_iterations << "); ";
   if (!(outlier_ratio > 0.0 && outlier_ratio < 1.0))
     err << "outlier_ratio must be in (0, 1) (got " << outlier_ratio << "); ";

@@ -204,9 +204,11 @@ TEST(NdtConfig, ValidateAndParse) {
   EXPECT_EQ(cfg.validate(), "");
   cfg.outlier_ratio = 1.0;
   cfg.max_iterations = 0;
+  cfg.coarse_yaw_probe = std::nan("");
   const std::string msg = cfg.validate();
   EXPECT_NE(msg.find("outlier_ratio"), std::string::npos);
   EXPECT_NE(msg.find("max_iterations"), std::string::npos);
+  EXPECT_NE(msg.find("coarse_yaw_probe"), std::string::npos);
   EXPECT_THROW(gpl::NdtAligner{cfg}, std::invalid_argument);
   gpl::NdtSearchMethod m;
   ASSERT_TRUE(gpl::parseSearchMethod("radius", &m));
