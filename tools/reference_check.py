@@ -14,8 +14,13 @@ within AMBIGUOUS_RATIO of the best, the scans cannot tell the motion (a featurel
 lies within MAX_SHIFT_M and MAX_TURN_DEG of the reference's motion. A scan's reference is *trusted* when both pairs
 it belongs to are consistent.
 
-Usage: reference_check.py SCANS_DIR POSES.kitti FIRST LAST [--json OUT]  (prints one JSON line per pair and a
-summary line; needs the built workspace for ndt_align)
+With --map MAP.pcd (a map built from the same reference poses, e.g. `gpm import`'s global_map.pcd) it checks the
+reference against that map instead: each scan, its ground kept, is registered onto the map from its reference pose,
+and the row says how far the map moves it (`map_shift_m`, `map_turn_deg`). Where the reference is bent, the map
+built from it is bent too, and a scan's own reference pose can lie a metre from where that map holds it.
+
+Usage: reference_check.py SCANS_DIR POSES.kitti FIRST LAST [--json OUT] [--map MAP.pcd]  (prints one JSON line per
+pair, or per scan with --map, and a summary line; needs the built workspace for ndt_align)
 """
 
 from __future__ import annotations
@@ -120,6 +125,26 @@ def check(scans_dir: Path, poses_path: Path, first: int, last: int) -> tuple[lis
     return rows, trusted
 
 
+def map_check(scans_dir: Path, poses_path: Path, first: int, last: int, map_path: Path) -> list[dict]:
+    """Per scan k in [first, last]: how far the registration onto ``map_path`` from the reference pose moves it."""
+    files = scan_files(scans_dir)
+    poses, _ = read_poses(poses_path, "kitti")
+    rows = []
+    for k in range(first, last + 1):
+        r = register(map_path, files[k], poses[k])
+        difference = np.linalg.inv(poses[k]) @ np.asarray(r["transform"])
+        rows.append(
+            {
+                "scan": k,
+                "status": r["status"],
+                "nvtl": round(r["nvtl"], 3),
+                "map_shift_m": round(float(np.linalg.norm(difference[:3, 3])), 3),
+                "map_turn_deg": round(float(np.degrees(Rotation.from_matrix(difference[:3, :3]).magnitude())), 3),
+            }
+        )
+    return rows
+
+
 def cached_check(
     scans_dir: Path, poses_path: Path, first: int, last: int, cache_dir: Path
 ) -> tuple[list[dict], set[int]]:
@@ -148,7 +173,19 @@ def main() -> int:
     parser.add_argument("first", type=int)
     parser.add_argument("last", type=int)
     parser.add_argument("--json", type=Path, help="also write the trusted scans and the rows to this file")
+    parser.add_argument("--map", type=Path, help="check each scan against this map (built from the same poses)")
     args = parser.parse_args()
+    if args.map:
+        rows = map_check(args.scans, args.poses, args.first, args.last, args.map)
+        for row in rows:
+            print(json.dumps(row))
+        shifts = [row["map_shift_m"] for row in rows]
+        print(
+            json.dumps(
+                {"scans": len(rows), "max_map_shift_m": max(shifts), "median_map_shift_m": float(np.median(shifts))}
+            )
+        )
+        return 0
     rows, trusted = check(args.scans, args.poses, args.first, args.last)
     for row in rows:
         print(json.dumps(row))

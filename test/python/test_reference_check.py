@@ -70,3 +70,20 @@ def test_the_cached_check_runs_once_per_input_and_again_when_the_poses_change(
     wrong_poses.write_text("\n".join(" ".join(f"{v:.9g}" for v in m[:3].ravel()) for m in (np.eye(4), wrong)))
     again = reference_check.cached_check(scans, wrong_poses, 0, 1, tmp_path / "cache")
     assert len(calls) == 2 and not again[0][0]["consistent"]
+
+
+def test_the_map_check_says_how_far_the_map_moves_a_scan_from_its_reference_pose(tmp_path, real_data, measured):
+    """The first scan of the pair is the map (pose I); the second's reference pose is the measured motion, then the
+    same 1.5 m off: the map moves it by the reference's own accuracy, then by about 1.5 m."""
+    wrong = measured.copy()
+    wrong[0, 3] += 1.5
+    shifts = []
+    for motion in (measured, wrong):
+        folder = tmp_path / f"run{len(shifts)}"
+        folder.mkdir()
+        scans, poses = pair_folder(folder, real_data, motion)
+        rows = reference_check.map_check(scans, poses, 1, 1, scans / "0.pcd")
+        assert [row["scan"] for row in rows] == [1] and rows[0]["status"] == "OK", rows
+        shifts.append(rows[0]["map_shift_m"])
+    assert shifts[0] < 0.05
+    assert shifts[1] == pytest.approx(1.5, abs=0.1)
