@@ -1,6 +1,7 @@
 """The forked background jobs (each runs exactly once, beside the caller, and a failure surfaces) and the
 thread pool that groups chunks ahead (results in order, bounded work in flight)."""
 
+import errno
 import functools
 import json
 import os
@@ -33,6 +34,19 @@ def test_failed_child_raises_after_the_block(tmp_path):
     with pytest.raises(OSError, match="tile writer process failed"), in_background([job], fork=True):
         (tmp_path / "caller").write_text("done")
     assert (tmp_path / "caller").exists()
+
+
+@pytest.mark.parametrize("while_waiting", [None, lambda: time.sleep(0.001)])
+def test_a_child_os_error_is_named_in_the_parent_error(while_waiting):
+    """A child that runs out of disk while the parent has nothing more to write: the parent's own error (the one
+    line gpm prints last) says why, not only that a child failed."""
+
+    def job() -> None:
+        raise OSError(errno.ENOSPC, "No space left on device", "/mnt/small/3.5_63.5.pcd")
+
+    reason = r"tile writer process failed: \[Errno 28\] No space left on device: '/mnt/small"
+    with pytest.raises(OSError, match=reason), in_background([job], fork=True, while_waiting=while_waiting):
+        pass
 
 
 def test_caller_failure_stops_and_waits_for_the_child(tmp_path):

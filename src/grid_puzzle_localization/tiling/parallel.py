@@ -27,6 +27,7 @@ T = TypeVar("T")
 R = TypeVar("R")
 
 WAIT_PAUSE_S = 0.01  # longest pause between calls of while_waiting
+MAX_REASON_BYTES = select.PIPE_BUF  # a failed child's reason: one atomic write into its empty exit pipe
 _BATCH = struct.Struct("<q")  # a batch in the queue: the index of its first item
 _MAX_BATCHES = select.PIPE_BUF // _BATCH.size  # the whole queue is one atomic pipe write
 _MIN_BATCH_ITEMS = 64
@@ -91,8 +92,8 @@ def in_background(
             job()
         yield
         return
-    # pid -> read end of a pipe whose write end only the child holds: readable (end of file) once it exited.
-    # A pipe rather than os.pidfd_open, which Python 3.8 lacks.
+    # pid -> read end of a pipe whose write end only the child holds: readable (end of file) once it exited, after
+    # the reason it failed, if it did. A pipe rather than os.pidfd_open, which Python 3.8 lacks.
     children: dict[int, int] = {}
     try:
         # SIGINT is blocked while forking: Python runs its at-fork handlers (logging's lock release) with
@@ -105,7 +106,7 @@ def in_background(
                 pid = os.fork()
                 if pid == 0:  # child: never return into the caller's stack
                     os.close(read_end)
-                    _run_child(job, mask)
+                    _run_child(job, mask, write_end)
                 os.close(write_end)
                 children[pid] = read_end
         finally:
@@ -121,12 +122,18 @@ def in_background(
     finally:
         try:
             codes = _wait_for(children, while_waiting)
+            reasons = [os.read(exit_fd, MAX_REASON_BYTES).decode(errors="replace") for exit_fd in children.values()]
         finally:
             for exit_fd in children.values():
                 os.close(exit_fd)
-    failed = [code for code in codes if code != 0]
+    failed = [(code, reason) for code, reason in zip(codes, reasons) if code != 0]
     if failed:
-        raise OSError(f"a tile writer process failed (exit status {failed[0]}); see the error above")
+        code, reason = failed[0]
+        raise OSError(
+            f"a tile writer process failed: {reason}"
+            if reason
+            else f"a tile writer process failed (exit status {code}); see the error above"
+        )
 
 
 def _wait_for(children: dict[int, int], while_waiting: Callable[[], None] | None) -> list[int]:
@@ -146,7 +153,8 @@ def _wait_for(children: dict[int, int], while_waiting: Callable[[], None] | None
     return [codes[pid] for pid in children]
 
 
-def _run_child(job: Callable[[], None], mask: Iterable[signal.Signals]) -> None:
+def _run_child(job: Callable[[], None], mask: Iterable[signal.Signals], exit_fd: int) -> None:
+    """Runs ``job`` and exits; an OSError's text (disk full, permissions) goes to ``exit_fd`` for the parent's error."""
     status = 1
     try:
         signal.pthread_sigmask(signal.SIG_SETMASK, mask)
@@ -154,8 +162,10 @@ def _run_child(job: Callable[[], None], mask: Iterable[signal.Signals]) -> None:
         status = 0
     except KeyboardInterrupt:  # Ctrl-C reaches the whole process group: the parent reports it
         pass
-    except OSError as err:  # disk full, permissions: the parent reports the failure, this says why
+    except OSError as err:  # disk full, permissions: the parent's error names the first failed child's reason
         print(f"tile writer process: {err}", file=sys.stderr)
+        with contextlib.suppress(OSError):
+            os.write(exit_fd, str(err).encode()[:MAX_REASON_BYTES])
     except BaseException:
         traceback.print_exc(file=sys.stderr)
     finally:
