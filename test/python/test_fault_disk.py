@@ -67,8 +67,8 @@ def small_disk(tmp_path):
 
 
 def check_clean_failure(err: str, rc: int) -> None:
-    """A non-zero exit whose last line is gpm's one-line error naming the cause; before it at most one line
-    per forked tile writer (--jobs 2) saying what it could not write; no traceback."""
+    """A non-zero exit whose last line is gpm's one-line error naming the cause (a forked tile writer's, with
+    --jobs 2, among them); a short error, no traceback."""
     lines = err.strip().splitlines()
     assert rc != 0
     assert "Traceback" not in err, err

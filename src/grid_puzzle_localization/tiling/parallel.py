@@ -128,11 +128,11 @@ def in_background(
                 os.close(exit_fd)
     failed = [(code, reason) for code, reason in zip(codes, reasons) if code != 0]
     if failed:
-        code, reason = failed[0]
+        named = "; ".join(dict.fromkeys(reason for _, reason in failed if reason))  # each distinct reason once
         raise OSError(
-            f"a tile writer process failed: {reason}"
-            if reason
-            else f"a tile writer process failed (exit status {code}); see the error above"
+            f"a tile writer process failed: {named}"
+            if named
+            else f"a tile writer process failed (exit status {failed[0][0]}); see the error above"
         )
 
 
@@ -154,7 +154,8 @@ def _wait_for(children: dict[int, int], while_waiting: Callable[[], None] | None
 
 
 def _run_child(job: Callable[[], None], mask: Iterable[signal.Signals], exit_fd: int) -> None:
-    """Runs ``job`` and exits; an OSError's text (disk full, permissions) goes to ``exit_fd`` for the parent's error."""
+    """Runs ``job`` and exits; an OSError's text (disk full, permissions) goes to ``exit_fd``: the parent's error
+    names it, so it is not printed here too."""
     status = 1
     try:
         signal.pthread_sigmask(signal.SIG_SETMASK, mask)
@@ -162,8 +163,7 @@ def _run_child(job: Callable[[], None], mask: Iterable[signal.Signals], exit_fd:
         status = 0
     except KeyboardInterrupt:  # Ctrl-C reaches the whole process group: the parent reports it
         pass
-    except OSError as err:  # disk full, permissions: the parent's error names the first failed child's reason
-        print(f"tile writer process: {err}", file=sys.stderr)
+    except OSError as err:
         with contextlib.suppress(OSError):
             os.write(exit_fd, str(err).encode()[:MAX_REASON_BYTES])
     except BaseException:
