@@ -1,6 +1,7 @@
 """Every `make bench-*` target in its quick mode (a few seconds on tiny inputs, no ../shared data), so a broken
-benchmark fails `make test` (tools/run_tests.sh bench). Each must exit 0 and print one JSON object per line.
-The figures are not judged here: speed is measured by the full benchmarks, never by tests."""
+benchmark fails `make test` (tools/run_tests.sh bench). Each must exit 0 and print one JSON object per line, and
+what some of them report must be consistent (the drive is tracked, tiles travel by reference and are tile-aligned,
+deltas arrive in order). No figure of speed or memory is judged here: that is the full benchmarks' to report."""
 
 from __future__ import annotations
 
@@ -40,13 +41,58 @@ def test_every_make_bench_target_has_a_quick_mode_here():
     assert make_bench_targets() == set(QUICK)
 
 
+@pytest.fixture(scope="module")
+def quick_output(tmp_path_factory):
+    """Each quick mode's JSON lines, run once per session and shared by the tests below."""
+    outputs: dict[str, list[dict]] = {}
+
+    def run(target: str) -> list[dict]:
+        if target not in outputs:
+            env = {**os.environ, "TMPDIR": str(tmp_path_factory.mktemp(target))}
+            done = subprocess.run(QUICK[target], cwd=ROOT, env=env, capture_output=True, text=True, timeout=TIMEOUT_S)
+            assert done.returncode == 0, f"{target} --quick failed ({done.returncode}):\n{done.stderr[-3000:]}"
+            lines = [line for line in done.stdout.splitlines() if line.strip()]
+            assert lines, f"{target} --quick printed nothing"
+            rows = [json.loads(line) for line in lines]  # one JSON document per line, never an indented one
+            for line, row in zip(lines, rows):
+                assert isinstance(row, dict), f"{target} printed a line that is not a JSON object: {line}"
+            outputs[target] = rows
+        return outputs[target]
+
+    return run
+
+
 @pytest.mark.parametrize("target", sorted(QUICK))
-def test_quick_mode_prints_json_lines(target, tmp_path):
-    env = {**os.environ, "TMPDIR": str(tmp_path)}
-    run = subprocess.run(QUICK[target], cwd=ROOT, env=env, capture_output=True, text=True, timeout=TIMEOUT_S)
-    assert run.returncode == 0, f"{target} --quick failed ({run.returncode}):\n{run.stderr[-3000:]}"
-    lines = [line for line in run.stdout.splitlines() if line.strip()]
-    assert lines, f"{target} --quick printed nothing"
-    for line in lines:
-        row = json.loads(line)  # one JSON document per line, never an indented one over many
-        assert isinstance(row, dict), f"{target} printed a line that is not a JSON object: {line}"
+def test_quick_mode_prints_json_lines(target, quick_output):
+    assert quick_output(target)
+
+
+def test_bench_scaling_quick_tracks_the_drive_in_both_modes_at_every_size(quick_output):
+    lines = quick_output("bench-scaling")
+    runs = [r for r in lines if r["bench"] == "scaling"]
+    assert sorted((r["factor"], r["mode"]) for r in runs) == sorted(
+        (f, m) for f in (1, 4, 16) for m in ("global", "tiles")
+    )
+    for r in runs:
+        assert r["tracked"] == r["scans"] > 0, r
+        assert r["worst_error_m"] < 0.1, r
+    for factor in (1, 4, 16):
+        glob, tiles = (next(r for r in runs if r["factor"] == factor and r["mode"] == m) for m in ("global", "tiles"))
+        assert glob["map_points"] == tiles["map_points"]
+        assert tiles["tile_aligned"] and tiles["tiles_read"] > 0
+        assert tiles["target_points_first"] < glob["target_points_first"]
+    # The map grows with the factor; the window does not (the quick crop is smaller than the window, which
+    # reaches into the neighbouring copies of the 2 x 2 grid but no farther).
+    points = {r["factor"]: r["target_points_first"] for r in runs if r["mode"] == "global"}
+    assert points[16] == 16 * points[1]
+    window = {r["factor"]: r["target_points_first"] for r in runs if r["mode"] == "tiles"}
+    assert window[16] == window[4] > window[1]
+    assert lines[-1]["bench"] == "scaling_summary"
+
+
+def test_bench_provider_quick_drives_the_node_with_deltas_in_order(quick_output):
+    (result,) = quick_output("bench-provider")
+    drive = result["sparse"]["drive"]
+    assert drive["delta_revisions_contiguous"] and drive["deltas_received"] > 3
+    assert drive["tiles_prefetch_per_update"]["max"] > 0
+    assert result["sparse"]["drive_with_map_cloud_subscriber"]["map_clouds_received"] > 0
