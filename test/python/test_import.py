@@ -275,6 +275,8 @@ def test_imported_scenario_gives_the_same_experiment_figures(simulated, tmp_path
             "global",
             "--settle",
             "1.5",
+            "--empty-map-seconds",
+            "0",  # accuracy only: no empty-map run for the memory floor
         ]
         assert cli.main(argv) == 0
         summary = yaml.safe_load((tmp_path / f"run_{name}" / "summary.json").read_text())
