@@ -13,6 +13,7 @@
 #include "grid_puzzle_localization/global_localization.hpp"
 #include "grid_puzzle_localization/pcd_reader.hpp"
 #include "grid_puzzle_localization/preprocess.hpp"
+#include "grid_puzzle_localization/rpy.hpp"
 #include "option_values.hpp"
 
 namespace gpl = grid_puzzle_localization;
@@ -159,18 +160,13 @@ Args parse(int argc, char** argv) {
 /// One search as JSON; `cpu_seconds` is the process's CPU time of it (all threads), which a busy machine does not
 /// inflate the way it inflates the wall time.
 std::string json(const gpl::GlobalLocalizationResult& r, double cpu_seconds) {
-  const Eigen::Matrix3d R = r.map_T_base.linear();
-  const Eigen::Vector3d t = r.map_T_base.translation();
-  // Fixed-axis roll-pitch-yaw of R = Rz(yaw) Ry(pitch) Rx(roll).
-  const double yaw = std::atan2(R(1, 0), R(0, 0));
-  const double pitch = std::asin(std::max(-1.0, std::min(1.0, -R(2, 0))));
-  const double roll = std::atan2(R(2, 1), R(2, 2));
+  const gpl::XyzRpy pose = gpl::xyzRpyFromPose(r.map_T_base);  // fixed-axis roll-pitch-yaw (ROS convention)
   std::ostringstream js;
   js.precision(9);
   std::string reason;
   for (const char c : r.reason) reason += (c == '"' || c == '\\') ? std::string("\\") + c : std::string(1, c);
-  js << "{\"found\": " << (r.found ? "true" : "false") << ", \"x\": " << t.x() << ", \"y\": " << t.y()
-     << ", \"z\": " << t.z() << ", \"roll\": " << roll << ", \"pitch\": " << pitch << ", \"yaw\": " << yaw
+  js << "{\"found\": " << (r.found ? "true" : "false") << ", \"x\": " << pose(0) << ", \"y\": " << pose(1)
+     << ", \"z\": " << pose(2) << ", \"roll\": " << pose(3) << ", \"pitch\": " << pose(4) << ", \"yaw\": " << pose(5)
      << ", \"score\": " << r.score << ", \"runner_up_score\": " << r.runner_up_score << ", \"fit\": " << r.fit
      << ", \"runner_up_fit\": " << r.runner_up_fit << ", \"confidence\": " << r.confidence
      << ", \"seconds\": " << r.seconds << ", \"grid_seconds\": " << r.grid_seconds
