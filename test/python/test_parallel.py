@@ -54,7 +54,9 @@ def test_caller_failure_stops_and_waits_for_the_child(tmp_path):
     child outlives the block, and one that would have run for a minute leaves no result."""
 
     def job() -> None:
-        (tmp_path / "pid").write_text(str(os.getpid()))
+        # Written whole, then renamed: the caller polls for the name and must never read an empty file.
+        (tmp_path / "pid.tmp").write_text(str(os.getpid()))
+        os.replace(tmp_path / "pid.tmp", tmp_path / "pid")
         time.sleep(60)
         (tmp_path / "job").write_text("done")
 
