@@ -43,7 +43,7 @@ def test_every_make_bench_target_has_a_quick_mode_here():
 
 @pytest.fixture(scope="module")
 def quick_output(tmp_path_factory):
-    """Each quick mode's JSON lines, run once per session and shared by the tests below."""
+    """Each quick mode's JSON lines, run once for this module and shared by the tests below."""
     outputs: dict[str, list[dict]] = {}
 
     def run(target: str) -> list[dict]:
