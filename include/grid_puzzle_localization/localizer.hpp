@@ -235,6 +235,7 @@ class Localizer {
   MapUpdateWorker worker_;
   std::shared_ptr<const VoxelMap> target_;
   PosePredictor predictor_;
+  std::optional<Twist> last_twist_;  // the last measured body twist; a recovery's predictor reset keeps it
   GyroIntegrator gyro_;
   FusionTracker fusion_;
   std::optional<Eigen::Isometry3d> pending_initial_pose_;

@@ -102,6 +102,7 @@ void Localizer::reset() {
   fusion_.reset();
   gyro_.clear();
   pending_initial_pose_ = default_initial_pose_;
+  last_twist_.reset();
   last_stamp_.reset();
   source_stamp_.reset();
   motion_seen_ = MotionBounds();
@@ -185,6 +186,7 @@ void Localizer::startFrom(const Eigen::Isometry3d& pose, double stamp, const Mat
                           double reference_nvtl) {
   pending_initial_pose_.reset();
   predictor_.reset(pose, stamp);
+  last_twist_.reset();
   motion_seen_ = MotionBounds();
   last_covariance_ = covariance;
   reference_nvtl_ = reference_nvtl;
@@ -382,7 +384,19 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   // pose; the search runs when it does not (a scene that fits many places, a fast start, scans far apart).
   const bool long_gap = !fresh && elapsed > config_.prediction.max_extrapolation;
   const bool velocity_unmeasured = !fresh && !velocity_trusted && !long_gap && elapsed >= 0.0;
-  const bool held_first = velocity_unmeasured && region.radius <= kHeldMatchReachVoxels * config_.ndt.resolution;
+  // After a recovery the vehicle most likely still moves as it did before it: the match from the last accepted pose
+  // moved on by the last measured twist is tried first, under the same gate.
+  if (velocity_unmeasured && last_twist_) {
+    Eigen::Isometry3d carried = predictor_.pose() * expTwist(*last_twist_, elapsed);
+    if (gyro_rotation) carried.linear() = held.linear();
+    NdtResult r = aligner_.align(*target_, source_, carried.cast<float>());
+    if (!poor(r)) {
+      out.ndt = r;
+      consider(std::move(r));
+    }
+  }
+  const bool held_first =
+      !best && velocity_unmeasured && region.radius <= kHeldMatchReachVoxels * config_.ndt.resolution;
   if (held_first) {
     out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
     if (!poor(out.ndt)) consider(out.ndt);
@@ -450,7 +464,10 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
       predictor_.reset(out.pose, stamp);
     else
       predictor_.update(out.pose, stamp, config_.preprocess.deskew_twist_smoothing);
-    if (predictor_.twistMeasured()) motion_seen_.add(predictor_.twist());
+    if (predictor_.twistMeasured()) {
+      motion_seen_.add(predictor_.twist());
+      last_twist_ = predictor_.twist();
+    }
     out.covariance = last_covariance_ = matchCovariance(out.ndt, config_.covariance);
     reference_nvtl_ = out.ndt.nvtl;
     out.twist_covariance = predictor_.twistMeasured() && elapsed > 0.0

@@ -362,6 +362,25 @@ TEST(Localizer, GapWhileSlowingDownIsBridgedBySearchingAroundTheLastPose) {
   EXPECT_LT(t::translationError(after_gap.prediction, run.outputs[20].pose), 1e-9);  // held at the last pose
 }
 
+// Issue 31 (KITTI with dropped scans): after a gap the pose is searched for and the velocity is unmeasured again. The
+// vehicle drives on at 4 m/s and the next scans come 1 s apart, farther than the NDT reaches from the pose found: the
+// match from that pose moved on by the velocity measured before the gap fits, so no second search runs.
+TEST(Localizer, AfterARecoveryTheVelocityMeasuredBeforeTheGapCarriesTheNextScans) {
+  auto truth = [](double time) { return t::poseXYYaw(-15.0 + 4.0 * time, 1.0, 0.05); };
+  std::vector<double> times = stamps(0.0, 2.0, 0.1);
+  for (double time : {5.0, 6.0, 7.0}) times.push_back(time);
+  const DriveRun run = drive(testConfig(), truth, times, truth(0.0));
+  EXPECT_EQ(run.accepted, run.scans);
+  EXPECT_LT(run.worst_error, 0.05);
+  EXPECT_TRUE(run.outputs[21].global_search);  // 3 s without a scan: searched around the last pose
+  for (std::size_t i = 22; i < run.outputs.size(); ++i) EXPECT_FALSE(run.outputs[i].global_search) << "scan " << i;
+  // What makes the case: 1 s after a pose, the motion seen bounds the scan to farther than four voxels from it.
+  gpl::MotionBounds seen;
+  seen.add((gpl::Twist() << 4.0, 0.0, 0.0, 0.0, 0.0, 0.0).finished());
+  EXPECT_GT(gpl::boundedSearchRegion(truth(5.0), 1.0, seen, false, testConfig().prediction).radius,
+            4.0 * testConfig().ndt.resolution);
+}
+
 // Issue 17 (MulRan): the bag starts while the car drives at 10 m/s with scans 0.5 s (5 m) apart. Zero velocity
 // is a bad prior for the second scan: it is searched, and tracking holds from the first scan on.
 TEST(Localizer, StartWhileMovingFastWithSparseScans) {
