@@ -250,6 +250,9 @@ int main(int argc, char** argv) {
   int half_window = 3;
   int threads = -1;  // -1: the LocalizerConfig default
   gpl::LocalizerConfig config;
+  // The scans come as fast as they are matched, not in real time: a search answers within the scan it searches,
+  // so a replay gives the same answer every run.
+  config.lost.background_search = false;
   gpl::MapStoreConfig store_config;
   std::string trace_path, tile_source, index_revision;
   for (int i = 3; i + 1 < argc; i += 2) {

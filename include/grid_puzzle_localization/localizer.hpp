@@ -4,6 +4,8 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <cstdint>
+#include <future>
 #include <memory>
 #include <optional>
 #include <string>
@@ -71,10 +73,16 @@ struct HypothesesConfig {
 /// bounded region, which grows with the time since). With a window of tiles that search runs only when the window
 /// holds all of its square: a look-alike place inside the window would otherwise win over the true one outside it.
 /// When it does not run or finds nothing, the later scans search the bounded region around the refused pose.
+/// With background_search the search runs on a thread of its own, one at a time, over the newest scan that needs
+/// it: the scans go on being processed (and are reported lost) meanwhile, and the pose found is taken up at the
+/// first scan after it finishes as the match of the scan it searched, so that scan is matched from it. Without
+/// it the search runs within processScan and answers for that scan (offline replays that need the same answer
+/// every time).
 struct LostConfig {
   double max_coast_time = 2.0;
   double search_period = 1.0;
   double initial_pose_search_size = 60.0;
+  bool background_search = true;
 
   std::string validate() const;
 };
@@ -147,11 +155,16 @@ struct LocalizerOutput {
   /// The pose may be published: a match was accepted, or the last accepted one is at most
   /// lost.max_coast_time old and a gyro covers the time since.
   bool publish = false;
-  double since_last_match = 0.0;     ///< [s] from the last accepted match (or initial pose) before this scan
-  int hypotheses = 0;                ///< candidates the hypotheses tried on this scan (after a poor match)
-  bool recovered = false;            ///< accepted after lost.max_coast_time without a match
-  bool global_search = false;        ///< the branch-and-bound search ran on this scan
+  /// [s] from the last accepted match (or initial pose) before this scan; on an accepted scan that took up a
+  /// background search's pose, the time without a match that the search ended.
+  double since_last_match = 0.0;
+  int hypotheses = 0;      ///< candidates the hypotheses tried on this scan (after a poor match)
+  bool recovered = false;  ///< accepted after lost.max_coast_time without a match
+  /// The branch-and-bound search answered on this scan: it ran within it, or (lost.background_search) one
+  /// started on an earlier scan finished and was taken up.
+  bool global_search = false;
   std::string global_search_reason;  ///< why its answer was refused (empty when taken or not run)
+  bool search_started = false;       ///< a background search of this scan was started (lost.background_search)
   NdtResult ndt;                     ///< the match (status INVALID_INPUT when no match was tried)
   PreprocessReport preprocess;
   double align_ms = 0.0;  ///< NDT only
@@ -208,8 +221,12 @@ class Localizer {
   bool mapHolds(const Eigen::Vector3d& centre, double half) const;
   /// The pose of the last accepted match, if any since the last reset.
   std::optional<Eigen::Isometry3d> lastAcceptedPose() const;
+  /// Blocks until a background search that is running has finished, so that the next scan takes up its answer
+  /// (offline callers that process scans faster than real time). Scan thread only.
+  void waitForSearch() const;
   /// True while the global search's structures (built by the last search) are held. They are released when a new
-  /// map snapshot arrives, with the snapshot they were built from, and rebuilt by the next search.
+  /// map snapshot arrives (once taken up when a background search ran then), with the snapshot they were built
+  /// from, and rebuilt by the next search. Not while a background search runs (it builds them): waitForSearch first.
   bool holdsSearchMap() const { return global_target_ != nullptr; }
 
  private:
@@ -217,6 +234,18 @@ class Localizer {
   /// The branch-and-bound search of `region` on the current source and target (the map given to it first
   /// when the target changed); found only when its refinement also passes the match gate.
   GlobalLocalizationResult searchGlobally(const SearchRegion& region);
+  /// The request that searches `region` (at least a voxel either way, a few yaw steps either side).
+  GlobalSearchRequest searchRequest(const SearchRegion& region) const;
+  /// Runs `request` on `source` in `target` (the search's map rebuilt when it was another target); found only when
+  /// the refinement also passes the match gate. On the background search's thread while one runs.
+  GlobalLocalizationResult runSearch(const std::shared_ptr<const VoxelMap>& target, const PointCloud& source,
+                                     const GlobalSearchRequest& request);
+  /// Takes up a finished background search: its pose becomes the match of the scan it searched when the track has
+  /// not moved since it started and the pose lies within its reach. Returns the time [s] from the last accepted
+  /// match to this scan when it was taken up.
+  std::optional<double> takeFinishedSearch(double stamp, LocalizerOutput& out);
+  /// Records `match` as the last accepted one: its covariance and NVTL, and the twist the predictor measured.
+  void noteAccepted(const NdtResult& match);
   /// Tracks from `pose` at `stamp` with no motion known yet (an initial pose, a global search's answer).
   void startFrom(const Eigen::Isometry3d& pose, double stamp, const Matrix6d& covariance, double reference_nvtl);
   /// The best acceptable match among the hypotheses: `held` (the last accepted pose) and yaw offsets around
@@ -248,6 +277,19 @@ class Localizer {
   GlobalLocalizer global_;
   std::shared_ptr<const VoxelMap> global_target_;  // the target global_ was given (rebuilt when it changes)
   std::optional<double> last_global_search_;       // scan stamp of the last recovery search
+  std::uint64_t track_version_ = 0;                // counts the changes of the last accepted pose
+  // A recovery search running on its own thread (lost.background_search). Declared last: its destructor waits for
+  // the thread, which uses global_ and global_target_.
+  struct BackgroundSearch {
+    std::future<GlobalLocalizationResult> result;
+    double stamp = 0.0;               // of the scan searched
+    std::uint64_t track_version = 0;  // when it started: a change since makes its answer stale
+    bool restarts_track = false;      // a start's or a gap's search: its pose is a correction, not a motion
+    bool anywhere = false;            // a wrong start's square: no reach check
+    Eigen::Vector2d held = Eigen::Vector2d::Zero();  // the reach check: the last accepted position [m]
+    double reach = 0.0;                              // and how far from it the pose may lie [m]
+  };
+  std::optional<BackgroundSearch> search_;
 };
 
 }  // namespace grid_puzzle_localization

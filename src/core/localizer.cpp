@@ -106,6 +106,7 @@ void Localizer::reset() {
   last_stamp_.reset();
   source_stamp_.reset();
   motion_seen_ = MotionBounds();
+  ++track_version_;
 }
 
 bool Localizer::mapHolds(const Eigen::Vector3d& centre, double half) const {
@@ -145,17 +146,10 @@ GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
     r.reason = "no scan yet";
     return r;
   }
-  if (global_target_ != target_) {
-    // The search's map is the target's voxel means (what the localizer holds of the map), refined on the target.
-    PointCloud means;
-    means.reserve(target_->gaussianCount());
-    target_->forEach([&](const VoxelKey&, const VoxelStats&, const VoxelGaussian& g) {
-      if (!g.valid) return;
-      means.push_back(g.mean);
-    });
-    global_.setMap(means, target_);
-    global_target_ = target_;
-  }
+  return runSearch(target_, source_, searchRequest(region));
+}
+
+GlobalSearchRequest Localizer::searchRequest(const SearchRegion& region) const {
   GlobalSearchRequest request;
   request.center_x = region.centre.translation().x();
   request.center_y = region.centre.translation().y();
@@ -164,7 +158,23 @@ GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
   // A known rotation is still searched over a few steps either side: the search's answer is refined by NDT.
   request.yaw_range =
       region.yaw_range >= M_PI ? 2.0 * M_PI : 2.0 * std::max(region.yaw_range, config_.hypotheses.yaw_step);
-  r = global_.localize(source_, request);
+  return request;
+}
+
+GlobalLocalizationResult Localizer::runSearch(const std::shared_ptr<const VoxelMap>& target, const PointCloud& source,
+                                              const GlobalSearchRequest& request) {
+  if (global_target_ != target) {
+    // The search's map is the target's voxel means (what the localizer holds of the map), refined on the target.
+    PointCloud means;
+    means.reserve(target->gaussianCount());
+    target->forEach([&](const VoxelKey&, const VoxelStats&, const VoxelGaussian& g) {
+      if (!g.valid) return;
+      means.push_back(g.mean);
+    });
+    global_.setMap(means, target);
+    global_target_ = target;
+  }
+  GlobalLocalizationResult r = global_.localize(source, request);
   if (r.found && !acceptable(r.refinement)) {
     r.found = false;
     r.reason = "the refined pose fails the match gate (match/*)";
@@ -172,7 +182,51 @@ GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
   return r;
 }
 
+void Localizer::waitForSearch() const {
+  if (search_) search_->result.wait();
+}
+
+std::optional<double> Localizer::takeFinishedSearch(double stamp, LocalizerOutput& out) {
+  if (!search_ || search_->result.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return std::nullopt;
+  BackgroundSearch job = std::move(*search_);
+  search_.reset();
+  const GlobalLocalizationResult g = job.result.get();
+  if (global_target_ && global_target_ != target_) {
+    // Built for a target swapped out while the search ran: released now, as at the swap.
+    global_.clearMap();
+    worker_.retire(std::move(global_target_));
+  }
+  if (job.track_version != track_version_ || !predictor_.initialized()) return std::nullopt;  // the track moved on
+  out.global_search = true;
+  out.global_search_reason = g.reason;
+  if (!g.found || (!job.anywhere && (g.map_T_base.translation().head<2>() - job.held).norm() > job.reach))
+    return std::nullopt;
+  const double lost_for = stamp - predictor_.stamp();
+  if (job.restarts_track) {
+    predictor_.reset(g.map_T_base, job.stamp);
+    fusion_.reset();  // the window starts again at the pose found
+  } else {
+    predictor_.update(g.map_T_base, job.stamp, config_.preprocess.deskew_twist_smoothing);
+  }
+  noteAccepted(g.refinement);
+  return lost_for;
+}
+
+void Localizer::noteAccepted(const NdtResult& match) {
+  if (predictor_.twistMeasured()) {
+    motion_seen_.add(predictor_.twist());
+    last_twist_ = predictor_.twist();
+  }
+  last_covariance_ = matchCovariance(match, config_.covariance);
+  reference_nvtl_ = match.nvtl;
+  ++track_version_;
+}
+
 GlobalLocalizationResult Localizer::globalLocalize(const SearchRegion& region) {
+  if (search_) {  // a background search's answer would come after this one's: it is not waited for
+    search_->result.wait();
+    search_.reset();
+  }
   GlobalLocalizationResult r = searchGlobally(region);
   if (!r.found) return r;
   // The pose of the last scan, at its stamp: the next scans search around it with a radius that grows with
@@ -191,6 +245,7 @@ void Localizer::startFrom(const Eigen::Isometry3d& pose, double stamp, const Mat
   last_covariance_ = covariance;
   reference_nvtl_ = reference_nvtl;
   last_global_search_.reset();
+  ++track_version_;
 }
 
 std::optional<NdtResult> Localizer::tryHypotheses(const Eigen::Isometry3d& guess, const Eigen::Isometry3d& held,
@@ -278,7 +333,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     // The old snapshot may hold the last reference to thousands of voxel buffers: the worker frees them.
     worker_.retire(std::exchange(target_, std::move(next)));
     out.map_swapped = true;
-    if (global_target_) {
+    if (global_target_ && !search_) {
       // The search structures of an older target would be rebuilt before the next search anyway, and they hold
       // that target alive (in tiles mode a whole window that has moved on): release both now.
       global_.clearMap();
@@ -307,6 +362,9 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     return out;
   }
   out.state = LocalizerState::kTracking;
+  // A background search that has finished answers for the scan it searched; its pose, taken up, is that scan's match.
+  const std::optional<double> lost_for = takeFinishedSearch(stamp, out);
+  const bool search_refused = out.global_search && !lost_for;
   // The predictor holds the last accepted pose. Its velocity is extrapolated only when it was measured and
   // the last match is recent; else the pose is searched around the last accepted one.
   const double elapsed = stamp - predictor_.stamp();
@@ -409,7 +467,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   const bool search_due = !long_gap || !last_global_search_ ||
                           stamp - *last_global_search_ >= config_.lost.search_period || stamp < *last_global_search_;
   std::optional<Eigen::Isometry3d> found_globally;
-  if ((!best || poor(*best)) && search_due) {
+  if ((!best || poor(*best)) && search_due && !search_ && !search_refused) {
     SearchRegion wide = region;
     if (long_gap && !rotation_known) wide.yaw_range = M_PI;
     // The square around a wrong start bounds where the pose is; no motion since it bounds it further.
@@ -419,16 +477,34 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
       wide.radius = std::max(wide.radius, start_half);
       wide.yaw_range = M_PI;
     }
-    GlobalLocalizationResult g = searchGlobally(wide);
-    last_global_search_ = stamp;
-    out.global_search = true;
-    out.global_search_reason = g.reason;
-    if (g.found && (start_search || reachable(g.refinement))) {
-      best = g.refinement;
-      found_globally = g.map_T_base;
+    if (!config_.lost.background_search) {
+      GlobalLocalizationResult g = searchGlobally(wide);
+      last_global_search_ = stamp;
+      out.global_search = true;
+      out.global_search_reason = g.reason;
+      if (g.found && (start_search || reachable(g.refinement))) {
+        best = g.refinement;
+        found_globally = g.map_T_base;
+      }
+    } else if (!(fresh && map_loading)) {  // a start whose map is loading is tried again, not searched from
+      BackgroundSearch job;
+      job.stamp = stamp;
+      job.track_version = track_version_;
+      job.restarts_track = fresh || long_gap;
+      job.anywhere = start_search;
+      job.held = held.translation().head<2>();
+      job.reach = region.radius + config_.ndt.resolution;
+      job.result = std::async(std::launch::async, [this, target = target_, source = source_, wide] {
+        return runSearch(target, source, searchRequest(wide));
+      });
+      search_ = std::move(job);
+      last_global_search_ = stamp;
+      out.search_started = true;
     }
   }
-  if (!best && velocity_unmeasured && !held_first) {
+  // With a background search running the search decides; the match from the last accepted pose is tried once it
+  // has refused.
+  if (!best && velocity_unmeasured && !held_first && (search_refused || !search_)) {
     // Farther than the NDT's reach the search decides. When it refuses a scene as ambiguous (a tunnel fits many places
     // along itself), the match from the last accepted pose is still tried, and taken when it fits as well as the
     // track did.
@@ -449,6 +525,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     // pose is kept for the next scan instead of being searched from as a lost track.
     pending_initial_pose_ = predictor_.pose();
     predictor_ = PosePredictor();
+    ++track_version_;
     out.state = LocalizerState::kWaitingForMap;
     out.scan_ms = msSince(start);
     return out;
@@ -457,19 +534,16 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   if (out.lost) out.search_region = region;
   out.since_last_match = fresh ? 0.0 : elapsed;
   if (out.match_accepted) {
-    out.recovered = !fresh && elapsed > config_.lost.max_coast_time;
+    if (lost_for) out.since_last_match = *lost_for;  // the time without a match that the search ended
+    out.recovered = !fresh && out.since_last_match > config_.lost.max_coast_time;
     // A pose found after a gap is a correction, not a motion to extrapolate: the velocity is measured again
     // from the next match. Within max_extrapolation of the last match it measures the motion like any match.
     if (fresh || (found_globally && long_gap))
       predictor_.reset(out.pose, stamp);
     else
       predictor_.update(out.pose, stamp, config_.preprocess.deskew_twist_smoothing);
-    if (predictor_.twistMeasured()) {
-      motion_seen_.add(predictor_.twist());
-      last_twist_ = predictor_.twist();
-    }
-    out.covariance = last_covariance_ = matchCovariance(out.ndt, config_.covariance);
-    reference_nvtl_ = out.ndt.nvtl;
+    noteAccepted(out.ndt);
+    out.covariance = last_covariance_;
     out.twist_covariance = predictor_.twistMeasured() && elapsed > 0.0
                                ? bodyFrameCovariance(out.covariance, out.pose.rotation()) * (2.0 / (elapsed * elapsed))
                                : predictionCovariance(config_.covariance);

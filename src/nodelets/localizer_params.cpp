@@ -127,6 +127,7 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
   load("lost/max_coast_time", c.lost.max_coast_time);
   load("lost/search_period", c.lost.search_period);
   load("lost/initial_pose_search_size", c.lost.initial_pose_search_size);
+  load("lost/background_search", c.lost.background_search);
   pnh.param("preprocess/time_field", p.time_field, p.time_field);
   load("ndt/resolution", c.ndt.resolution);
   load("ndt/min_points_per_voxel", c.ndt.min_points_per_voxel);

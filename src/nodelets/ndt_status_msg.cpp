@@ -25,6 +25,7 @@ NdtStatus toStatusMsg(const LocalizerOutput& out, const std_msgs::Header& header
   msg.since_last_match = out.since_last_match;
   msg.global_search = out.global_search;
   msg.global_search_reason = out.global_search_reason;
+  msg.search_started = out.search_started;
   msg.search_x = out.search_region.centre.translation().x();
   msg.search_y = out.search_region.centre.translation().y();
   msg.search_radius = out.search_region.radius;

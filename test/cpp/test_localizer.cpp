@@ -18,6 +18,7 @@ gpl::LocalizerConfig testConfig() {
   gpl::LocalizerConfig c;
   c.preprocess.voxel_size = 0.4;
   c.preprocess.max_range = 30.0;
+  c.lost.background_search = false;  // the search answers within its scan: every run the same
   return c;
 }
 
@@ -329,6 +330,8 @@ DriveRun drive(const gpl::LocalizerConfig& config, const Truth& truth, const std
       if (unpublished_since) run.longest_unpublished = std::max(run.longest_unpublished, time - *unpublished_since);
       unpublished_since.reset();
     }
+    // A background search answers at the first scan after it finishes: here, at the next scan.
+    if (out.search_started) loc.waitForSearch();
     run.outputs.push_back(std::move(out));
   }
   return run;
@@ -545,6 +548,79 @@ TEST(Localizer, AWrongInitialPoseIsSearchedAroundAtOnce) {
       EXPECT_TRUE(out.lost);
     }
   }
+}
+
+// Issue 31 (a search on its own thread): the scan after the 3 s gap starts the search and is reported lost, not
+// published; the next scan takes the pose found up as that scan's match, is matched from it, and reports the
+// recovery; the drive goes on tracked.
+TEST(Localizer, ABackgroundSearchIsTakenUpAtTheNextScan) {
+  gpl::LocalizerConfig c = testConfig();
+  c.lost.background_search = true;
+  std::vector<double> times = stamps(0.0, 2.0, 0.1);
+  for (double time : stamps(5.0, 7.0, 0.1)) times.push_back(time);
+  const DriveRun run = drive(c, slowingDown, times, slowingDown(0.0));
+  const gpl::LocalizerOutput& after_gap = run.outputs[21];
+  EXPECT_TRUE(after_gap.search_started);
+  EXPECT_FALSE(after_gap.global_search);
+  EXPECT_TRUE(after_gap.lost);
+  EXPECT_FALSE(after_gap.publish);
+  const gpl::LocalizerOutput& taken_up = run.outputs[22];
+  EXPECT_TRUE(taken_up.global_search) << taken_up.global_search_reason;
+  EXPECT_TRUE(taken_up.match_accepted);
+  EXPECT_TRUE(taken_up.recovered);
+  EXPECT_NEAR(taken_up.since_last_match, 3.1, 1e-6);  // from the last scan before the gap
+  EXPECT_EQ(run.accepted, run.scans - 1);
+  EXPECT_EQ(run.searches, 1);
+  EXPECT_LT(run.worst_error, 0.05);
+  EXPECT_LT(run.worst_yaw_error, 0.005);
+}
+
+// A wrong start with the search on its own thread: the first scan is refused and starts the search of the square
+// around the pose given; the second is matched from the pose found.
+TEST(Localizer, AWrongInitialPoseIsSearchedAroundInTheBackground) {
+  gpl::LocalizerConfig c = testConfig();
+  c.lost.background_search = true;
+  c.match.min_nvtl = 1.5;  // as in AWrongInitialPoseIsSearchedAroundAtOnce
+  const Eigen::Isometry3d truth = t::poseXYYaw(4.0, -3.0, 0.3);
+  const gpl::PointCloud world = t::makeWorld();
+  gpl::Localizer loc(c);
+  loc.map().submit(gpl::MapChange::fullCloud(world));
+  loc.map().waitIdle();
+  loc.setInitialPose(truth * t::poseXYYaw(14.0, -14.0, M_PI / 2));
+  const gpl::LocalizerOutput first =
+      loc.processScan(0.0, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 900), mount());
+  EXPECT_TRUE(first.search_started);
+  EXPECT_TRUE(first.lost);
+  EXPECT_FALSE(first.publish);
+  loc.waitForSearch();
+  const gpl::LocalizerOutput second =
+      loc.processScan(0.1, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 901), mount());
+  EXPECT_TRUE(second.global_search) << second.global_search_reason;
+  ASSERT_TRUE(second.match_accepted);
+  EXPECT_LT(t::translationError(second.pose, truth), 0.05);
+  EXPECT_LT(t::rotationError(second.pose, truth), 0.005);
+}
+
+// A search whose track has moved on is not taken up: a new initial pose given while it ran replaces what it searched
+// for (here the true pose, so the scan after it is matched from that pose, not from the search's answer).
+TEST(Localizer, ABackgroundSearchOfAnOlderTrackIsDropped) {
+  gpl::LocalizerConfig c = testConfig();
+  c.lost.background_search = true;
+  c.match.min_nvtl = 1.5;
+  const Eigen::Isometry3d truth = t::poseXYYaw(4.0, -3.0, 0.3);
+  const gpl::PointCloud world = t::makeWorld();
+  gpl::Localizer loc(c);
+  loc.map().submit(gpl::MapChange::fullCloud(world));
+  loc.map().waitIdle();
+  loc.setInitialPose(truth * t::poseXYYaw(14.0, -14.0, M_PI / 2));
+  EXPECT_TRUE(loc.processScan(0.0, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 910), mount()).search_started);
+  loc.waitForSearch();
+  loc.setInitialPose(truth);
+  const gpl::LocalizerOutput out =
+      loc.processScan(0.1, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 911), mount());
+  EXPECT_FALSE(out.global_search);
+  EXPECT_TRUE(out.match_accepted);
+  EXPECT_LT(t::translationError(out.pose, truth), 0.05);
 }
 
 // Hand-held at 2 Hz without a gyro: the yaw swings +-30 deg about the walking direction in step with the scans, so
