@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 GAP = (4.0, 12.0)  # no scans in between [s from the start]
 MAX_COAST_TIME = 2.0  # lost/max_coast_time, the core's default
-START_SEARCH_BOUND = 1.0  # [s of the drive] from the first scan to the one that takes the start search's pose up
+START_SEARCH_BOUND = 1.0  # [s of the drive] from the first scan to the first pose published
 NAMES = ("gap", "offset", "global")
 
 
@@ -88,8 +88,9 @@ class LocalizerRecoveryTest(replay.DriveReplayTest):
     def test_start_30m_90deg_off_is_found_by_the_start_search(self) -> None:
         """The wrong start fits no scan, so the first scan starts the search of the square of
         lost/initial_pose_search_size (60 m) around it over every yaw, on its own thread (lost/background_search), and
-        is not published; the first scan after the search takes its pose up and is matched from it: the wrong start
-        itself is never published."""
+        is not published; the first scan after the search takes its pose up and is matched from it (or, farther from
+        it than the NDT reaches, searches the little region around it first): the wrong start itself is never
+        published."""
         track = self.tracks["offset"]
         stamps = sorted(track.statuses)
         self.assertTrue(stamps, "no status")
@@ -98,14 +99,16 @@ class LocalizerRecoveryTest(replay.DriveReplayTest):
         self.assertFalse(first_status.published, "the wrong start was published")
         answered = [t for t in stamps if track.statuses[t].global_search]
         self.assertTrue(answered, "the start search never answered")
-        taken_up = track.statuses[answered[0]]
-        self.assertTrue(taken_up.match_accepted, f"the start search refused: {taken_up.global_search_reason}")
-        self.assertEqual(min(track.poses), answered[0], "a pose was published before the search answered")
-        # Played at a quarter of real time: 1 s of the drive is 4 s for the search, loaded machine or not.
-        self.assertLessEqual(answered[0] - stamps[0], START_SEARCH_BOUND, "the start search answered late")
-        self.assertLess(self.error(answered[0], track.poses[answered[0]]), 0.05, "the first pose is off")
+        reason = track.statuses[answered[0]].global_search_reason
+        self.assertEqual(reason, "", f"the start search refused: {reason}")
+        self.assertTrue(track.poses, "no pose published")
+        first = min(track.poses)
+        self.assertGreaterEqual(first, answered[0], "a pose was published before the search answered")
+        # Played at a quarter of real time: 1 s of the drive is 4 s of wall time, loaded machine or not.
+        self.assertLessEqual(first - stamps[0], START_SEARCH_BOUND, "the first pose came late")
+        self.assertLess(self.error(first, track.poses[first]), 0.05, "the first pose is off")
         self.assert_never_stale(track)
-        self.assert_tracks_after(track, answered[0], "offset")
+        self.assert_tracks_after(track, first, "offset")
 
     def test_no_initial_pose_finds_itself_and_tracks_within_5cm(self) -> None:
         track = self.tracks["global"]
