@@ -278,6 +278,7 @@ class Localizer {
   std::shared_ptr<const VoxelMap> global_target_;  // the target global_ was given (rebuilt when it changes)
   std::optional<double> last_global_search_;       // scan stamp of the last recovery search
   std::uint64_t track_version_ = 0;                // counts the changes of the last accepted pose
+  bool start_refused_ = false;                     // the given pose held was refused by its first scan
   // A recovery search running on its own thread (lost.background_search). Declared last: its destructor waits for
   // the thread, which uses global_ and global_target_.
   struct BackgroundSearch {

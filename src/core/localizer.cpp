@@ -106,6 +106,7 @@ void Localizer::reset() {
   last_stamp_.reset();
   source_stamp_.reset();
   motion_seen_ = MotionBounds();
+  start_refused_ = false;
   ++track_version_;
 }
 
@@ -219,6 +220,7 @@ void Localizer::noteAccepted(const NdtResult& match) {
   }
   last_covariance_ = matchCovariance(match, config_.covariance);
   reference_nvtl_ = match.nvtl;
+  start_refused_ = false;
   ++track_version_;
 }
 
@@ -245,6 +247,7 @@ void Localizer::startFrom(const Eigen::Isometry3d& pose, double stamp, const Mat
   last_covariance_ = covariance;
   reference_nvtl_ = reference_nvtl;
   last_global_search_.reset();
+  start_refused_ = false;
   ++track_version_;
 }
 
@@ -441,7 +444,9 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   // taken when it fits as well as the track did and the motion bound keeps the scan within the NDT's reach of that
   // pose; the search runs when it does not (a scene that fits many places, a fast start, scans far apart).
   const bool long_gap = !fresh && elapsed > config_.prediction.max_extrapolation;
-  const bool velocity_unmeasured = !fresh && !velocity_trusted && !long_gap && elapsed >= 0.0;
+  // A given pose that its first scan refused is not matched from again (a match near it may pass the gate yet be
+  // wrong): until a pose is accepted, only the search places the scans.
+  const bool velocity_unmeasured = !fresh && !velocity_trusted && !long_gap && elapsed >= 0.0 && !start_refused_;
   // After a recovery the vehicle most likely still moves as it did before it: the match from the last accepted pose
   // moved on by the last measured twist is tried first, under the same gate.
   if (velocity_unmeasured && last_twist_) {
@@ -531,6 +536,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     return out;
   }
   out.lost = !out.match_accepted;
+  if (fresh && out.lost) start_refused_ = true;
   if (out.lost) out.search_region = region;
   out.since_last_match = fresh ? 0.0 : elapsed;
   if (out.match_accepted) {
