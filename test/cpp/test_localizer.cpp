@@ -24,6 +24,16 @@ gpl::LocalizerConfig testConfig() {
 
 Eigen::Isometry3d mount() { return t::poseXYYaw(0.3, 0.0, 0.05, 1.8); }
 
+// The whole cloud as the localizer's map, applied before the call returns.
+void loadMap(gpl::Localizer& loc, const gpl::PointCloud& cloud) {
+  loc.map().submit(gpl::MapChange::fullCloud(cloud));
+  loc.map().waitIdle();
+}
+
+// Where the vehicle stands in the start tests, and a start 20 m and 90 deg off it (relative to that pose).
+Eigen::Isometry3d standingPose() { return t::poseXYYaw(4.0, -3.0, 0.3); }
+Eigen::Isometry3d wrongStartOffset() { return t::poseXYYaw(14.0, -14.0, M_PI / 2); }
+
 // Ground truth of a drive through the yard: 4 m/s with a slow turn, base_link at z = 0.
 Eigen::Isometry3d truthAt(double time) {
   return t::poseXYYaw(-15.0 + 4.0 * time, 2.0 * std::sin(0.4 * time), std::atan2(0.8 * std::cos(0.4 * time), 4.0));
@@ -40,8 +50,7 @@ TEST(Localizer, WaitsForMapThenInitialPoseThenTracksGroundTruth) {
   gpl::Localizer loc(testConfig());
   gpl::LocalizerOutput out = loc.processScan(0.0, scanAt(world, 0.0, 1), mount());
   EXPECT_EQ(out.state, gpl::LocalizerState::kWaitingForMap);
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
+  loadMap(loc, world);
   out = loc.processScan(0.1, scanAt(world, 0.1, 2), mount());
   EXPECT_TRUE(out.map_swapped);
   EXPECT_EQ(out.state, gpl::LocalizerState::kWaitingForInitialPose);
@@ -67,8 +76,7 @@ TEST(Localizer, SlidingWindowFusionTracksGroundTruthWithImu) {
   gpl::LocalizerConfig config = testConfig();
   config.fusion.mode = gpl::FusionMode::kSlidingWindow;
   gpl::Localizer loc(config);
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
+  loadMap(loc, world);
   loc.setInitialPose(truthAt(0.0));
   // Noise-free IMU at base_link, 200 Hz: the drive's yaw rate and specific force by central differences.
   auto imuAt = [](double time) {
@@ -123,8 +131,7 @@ TEST(Localizer, SlidingWindowFusionTracksGroundTruthWithImu) {
 TEST(Localizer, RecoversFromOneMetreFiveDegreeInitialOffset) {
   const gpl::PointCloud world = t::makeWorld();
   gpl::Localizer loc(testConfig());
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
+  loadMap(loc, world);
   loc.setInitialPose(t::poseXYYaw(0.8, -0.6, 5.0 * M_PI / 180.0) * truthAt(0.0));
   gpl::LocalizerOutput out;
   for (int i = 0; i <= 20; ++i) out = loc.processScan(0.1 * i, scanAt(world, 0.1 * i, 100 + i), mount());
@@ -135,8 +142,7 @@ TEST(Localizer, RecoversFromOneMetreFiveDegreeInitialOffset) {
 TEST(Localizer, BadMatchPublishesThePredictionNeverNaN) {
   const gpl::PointCloud world = t::makeWorld();
   gpl::Localizer loc(testConfig());
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
+  loadMap(loc, world);
   loc.setInitialPose(truthAt(0.0));
   loc.processScan(0.0, scanAt(world, 0.0, 1), mount());
   loc.processScan(0.1, scanAt(world, 0.1, 2), mount());
@@ -159,8 +165,7 @@ TEST(Localizer, TimeGoingBackwardsResetsToTheDefaultInitialPose) {
   const gpl::PointCloud world = t::makeWorld();
   gpl::Localizer loc(testConfig());
   loc.setDefaultInitialPose(truthAt(0.0));
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
+  loadMap(loc, world);
   for (int i = 0; i <= 10; ++i) loc.processScan(0.1 * i, scanAt(world, 0.1 * i, i), mount());
   const gpl::LocalizerOutput out = loc.processScan(0.0, scanAt(world, 0.0, 50), mount());
   EXPECT_TRUE(out.reset);
@@ -169,8 +174,7 @@ TEST(Localizer, TimeGoingBackwardsResetsToTheDefaultInitialPose) {
   EXPECT_NEAR(out.twist.norm(), 0.0, 1e-12);  // the motion history was dropped
   // Without a default pose a reset waits for a new one.
   gpl::Localizer no_default(testConfig());
-  no_default.map().submit(gpl::MapChange::fullCloud(world));
-  no_default.map().waitIdle();
+  loadMap(no_default, world);
   no_default.setInitialPose(truthAt(0.0));
   no_default.processScan(5.0, scanAt(world, 0.0, 1), mount());
   EXPECT_EQ(no_default.processScan(1.0, scanAt(world, 0.0, 1), mount()).state,
@@ -185,8 +189,7 @@ TEST(Localizer, TilesChangingDuringTheDriveMatchTheFullMap) {
   const gpl::PointCloud world = t::makeWorld();
   const auto tiles = t::cutTiles(world, 5.0f);
   gpl::Localizer full(testConfig());
-  full.map().submit(gpl::MapChange::fullCloud(world));
-  full.map().waitIdle();
+  loadMap(full, world);
   gpl::Localizer tiled(testConfig());
   std::set<std::string> loaded;
   auto window = [&](const Eigen::Isometry3d& pose) {
@@ -234,8 +237,7 @@ TEST(Localizer, ScansKeepFlowingWhileTheMapIsReplacedConcurrently) {
   // No waitIdle between updates: the scan thread and the worker overlap, as in the nodelet.
   const gpl::PointCloud world = t::makeWorld();
   gpl::Localizer loc(testConfig());
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
+  loadMap(loc, world);
   loc.setInitialPose(truthAt(0.0));
   std::thread feeder([&] {
     for (int k = 0; k < 5; ++k) loc.map().submit(gpl::MapChange::fullCloud(world));
@@ -267,8 +269,7 @@ TEST(Localizer, RejectsBadConfigNamingTheValue) {
 TEST(Localizer, TrackingScansTakeOneNewtonStep) {
   const gpl::PointCloud world = t::makeWorld();
   gpl::Localizer loc(testConfig());
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
+  loadMap(loc, world);
   loc.setInitialPose(truthAt(0.0));
   double worst = 0.0;
   for (int i = 0; i <= 40; ++i) {
@@ -306,8 +307,7 @@ DriveRun drive(const gpl::LocalizerConfig& config, const Truth& truth, const std
                const Eigen::Isometry3d& initial_pose) {
   const gpl::PointCloud world = t::makeWorld();
   gpl::Localizer loc(config);
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
+  loadMap(loc, world);
   loc.setInitialPose(initial_pose);
   DriveRun run;
   std::optional<double> last_accepted, unpublished_since;
@@ -409,8 +409,7 @@ TEST(Localizer, InATunnelTheSearchFindsAmbiguousTheTrackHoldsFromTheLastPose) {
   for (gpl::Point& p : tunnel) p += gpl::Point(noise(rng), noise(rng), noise(rng));
   const Eigen::Isometry3d truth = t::poseXYYaw(0.0, -2.0, 0.0);
   gpl::Localizer loc(testConfig());
-  loc.map().submit(gpl::MapChange::fullCloud(tunnel));
-  loc.map().waitIdle();
+  loadMap(loc, tunnel);
   loc.setInitialPose(truth);
   for (int i = 0; i < 20; ++i) {
     const gpl::LocalizerOutput out =
@@ -448,8 +447,7 @@ TEST(Localizer, InitialPoseWaitsForTheMapStillLoading) {
   for (const gpl::Point& p : world)
     if (p.x() > 20.0f && p.y() > 10.0f) far_corner.push_back(p);
   gpl::Localizer loc(testConfig());
-  loc.map().submit(gpl::MapChange::fullCloud(far_corner));
-  loc.map().waitIdle();
+  loadMap(loc, far_corner);
   loc.setInitialPose(truthAt(0.0));
   loc.map().submit(gpl::MapChange::fullCloud(world));  // still being built when the first scan comes
   const gpl::LocalizerOutput first = loc.processScan(0.0, scanAt(world, 0.0, 1), mount());
@@ -484,11 +482,10 @@ TEST(Localizer, LostStopsPublishingThenTheGlobalSearchRecovers) {
   c.match.min_nvtl = 1.5;
   c.lost.max_coast_time = 1.0;
   c.lost.initial_pose_search_size = 0.0;  // only the bounded region (AWrongInitialPoseIsSearchedAroundAtOnce)
-  const Eigen::Isometry3d truth = t::poseXYYaw(4.0, -3.0, 0.3);
+  const Eigen::Isometry3d truth = standingPose();
   const gpl::PointCloud world = t::makeWorld();
   gpl::Localizer loc(c);
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
+  loadMap(loc, world);
   loc.setInitialPose(truth * t::poseXYYaw(-30.0, 0.0, M_PI / 2));
   std::optional<double> recovered_at;
   bool stopped = false;
@@ -524,14 +521,13 @@ TEST(Localizer, LostStopsPublishingThenTheGlobalSearchRecovers) {
 TEST(Localizer, AWrongInitialPoseIsSearchedAroundAtOnce) {
   gpl::LocalizerConfig c = testConfig();
   c.match.min_nvtl = 1.5;  // as in LostStopsPublishingThenTheGlobalSearchRecovers
-  const Eigen::Isometry3d truth = t::poseXYYaw(4.0, -3.0, 0.3);
+  const Eigen::Isometry3d truth = standingPose();
   const gpl::PointCloud world = t::makeWorld();
   for (const double size : {60.0, 0.0}) {
     c.lost.initial_pose_search_size = size;
     gpl::Localizer loc(c);
-    loc.map().submit(gpl::MapChange::fullCloud(world));
-    loc.map().waitIdle();
-    loc.setInitialPose(truth * t::poseXYYaw(14.0, -14.0, M_PI / 2));
+    loadMap(loc, world);
+    loc.setInitialPose(truth * wrongStartOffset());
     const gpl::LocalizerOutput out =
         loc.processScan(0.0, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 900), mount());
     EXPECT_TRUE(out.global_search) << "size " << size;
@@ -581,12 +577,11 @@ TEST(Localizer, AWrongInitialPoseIsSearchedAroundInTheBackground) {
   gpl::LocalizerConfig c = testConfig();
   c.lost.background_search = true;
   c.match.min_nvtl = 1.5;  // as in AWrongInitialPoseIsSearchedAroundAtOnce
-  const Eigen::Isometry3d truth = t::poseXYYaw(4.0, -3.0, 0.3);
+  const Eigen::Isometry3d truth = standingPose();
   const gpl::PointCloud world = t::makeWorld();
   gpl::Localizer loc(c);
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
-  loc.setInitialPose(truth * t::poseXYYaw(14.0, -14.0, M_PI / 2));
+  loadMap(loc, world);
+  loc.setInitialPose(truth * wrongStartOffset());
   const gpl::LocalizerOutput first =
       loc.processScan(0.0, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 900), mount());
   EXPECT_TRUE(first.search_started);
@@ -608,11 +603,10 @@ TEST(Localizer, ARefusedStartIsNotMatchedFromAgain) {
   for (const bool background : {true, false}) {
     gpl::LocalizerConfig c = testConfig();
     c.lost.background_search = background;
-    const Eigen::Isometry3d truth = t::poseXYYaw(4.0, -3.0, 0.3);
+    const Eigen::Isometry3d truth = standingPose();
     const gpl::PointCloud world = t::makeWorld();
     gpl::Localizer loc(c);
-    loc.map().submit(gpl::MapChange::fullCloud(world));
-    loc.map().waitIdle();
+    loadMap(loc, world);
     loc.setInitialPose(truth * t::poseXYYaw(6.0, 0.0, 0.5));
     EXPECT_TRUE(loc.processScan(0.0, gpl::PointCloud(), mount()).lost);
     int accepted = 0;
@@ -633,12 +627,11 @@ TEST(Localizer, ABackgroundSearchOfAnOlderTrackIsDropped) {
   gpl::LocalizerConfig c = testConfig();
   c.lost.background_search = true;
   c.match.min_nvtl = 1.5;
-  const Eigen::Isometry3d truth = t::poseXYYaw(4.0, -3.0, 0.3);
+  const Eigen::Isometry3d truth = standingPose();
   const gpl::PointCloud world = t::makeWorld();
   gpl::Localizer loc(c);
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
-  loc.setInitialPose(truth * t::poseXYYaw(14.0, -14.0, M_PI / 2));
+  loadMap(loc, world);
+  loc.setInitialPose(truth * wrongStartOffset());
   EXPECT_TRUE(loc.processScan(0.0, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 910), mount()).search_started);
   loc.waitForSearch();
   loc.setInitialPose(truth);
@@ -661,8 +654,7 @@ TEST(Localizer, HandHeldSixtyDegreeFlipsAreNeverPublishedWithAWrongHeading) {
   const gpl::LocalizerConfig c = testConfig();
   const gpl::PointCloud world = t::makeWorld();
   gpl::Localizer loc(c);
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
+  loadMap(loc, world);
   loc.setInitialPose(truth(0.0));
   int published = 0;
   double last_published = 0.0, longest_unpublished = 0.0;
@@ -690,8 +682,7 @@ TEST(Localizer, WithAGyroThePredictionIsPublishedForMaxCoastTime) {
   const gpl::PointCloud world = t::makeWorld();
   const Eigen::Isometry3d truth = t::poseXYYaw(2.0, 1.0, 0.2);
   gpl::Localizer loc(c);
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
+  loadMap(loc, world);
   loc.setInitialPose(truth);
   for (int k = 0; k <= 500; ++k) loc.addGyro(0.01 * k, Eigen::Vector3d::Zero());  // standing still
   const gpl::LocalizerOutput first =
@@ -727,8 +718,7 @@ TEST(Localizer, GlobalLocalizeSetsThePoseWithoutAnInitialPose) {
   const Eigen::Isometry3d truth = t::poseXYYaw(-6.0, 4.0, -1.2);
   const gpl::PointCloud world = t::makeWorld();
   gpl::Localizer loc(testConfig());
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
+  loadMap(loc, world);
   EXPECT_EQ(loc.processScan(0.0, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 900), mount()).state,
             gpl::LocalizerState::kWaitingForInitialPose);
   gpl::SearchRegion whole;
@@ -750,8 +740,7 @@ TEST(Localizer, SearchStructuresAreReleasedWithTheMapTheyWereBuiltFrom) {
   const Eigen::Isometry3d truth = t::poseXYYaw(-6.0, 4.0, -1.2);
   const gpl::PointCloud world = t::makeWorld();
   gpl::Localizer loc(testConfig());
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
+  loadMap(loc, world);
   loc.processScan(0.0, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 900), mount());
   gpl::SearchRegion region;
   region.centre = t::poseXYYaw(-4.0, 3.0, 0.0);
@@ -761,8 +750,7 @@ TEST(Localizer, SearchStructuresAreReleasedWithTheMapTheyWereBuiltFrom) {
   EXPECT_TRUE(loc.holdsSearchMap());
   EXPECT_TRUE(loc.processScan(0.1, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 901), mount()).match_accepted);
   EXPECT_TRUE(loc.holdsSearchMap());  // same map
-  loc.map().submit(gpl::MapChange::fullCloud(world));
-  loc.map().waitIdle();
+  loadMap(loc, world);
   const gpl::LocalizerOutput out =
       loc.processScan(0.2, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 902), mount());
   EXPECT_TRUE(out.map_swapped);
