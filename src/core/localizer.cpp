@@ -187,6 +187,20 @@ void Localizer::waitForSearch() const {
   if (search_) search_->result.wait();
 }
 
+void Localizer::startBackgroundSearch(double stamp, const SearchRegion& region, bool restarts_track,
+                                      const std::optional<Reach>& reach) {
+  BackgroundSearch job;
+  job.stamp = stamp;
+  job.track_version = track_version_;
+  job.restarts_track = restarts_track;
+  job.reach = reach;
+  job.result = std::async(std::launch::async, [this, target = target_, source = source_, region] {
+    return runSearch(target, source, searchRequest(region));
+  });
+  search_ = std::move(job);
+  last_global_search_ = stamp;
+}
+
 std::optional<double> Localizer::takeFinishedSearch(double stamp, LocalizerOutput& out) {
   if (!search_ || search_->result.wait_for(std::chrono::seconds(0)) != std::future_status::ready) return std::nullopt;
   BackgroundSearch job = std::move(*search_);
@@ -200,8 +214,7 @@ std::optional<double> Localizer::takeFinishedSearch(double stamp, LocalizerOutpu
   if (job.track_version != track_version_ || !predictor_.initialized()) return std::nullopt;  // the track moved on
   out.global_search = true;
   out.global_search_reason = g.reason;
-  if (!g.found || (!job.anywhere && (g.map_T_base.translation().head<2>() - job.held).norm() > job.reach))
-    return std::nullopt;
+  if (!g.found || (job.reach && !job.reach->holds(g.map_T_base))) return std::nullopt;
   const double lost_for = stamp - predictor_.stamp();
   if (job.restarts_track) {
     predictor_.reset(g.map_T_base, job.stamp);
@@ -410,15 +423,12 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   auto poor = [&](const NdtResult& r) {
     return !acceptable(r) || r.nvtl < config_.hypotheses.poor_nvtl_ratio * reference_nvtl_;
   };
-  // A match farther from the last accepted pose than the bounded region reaches (the fastest motion seen, or
-  // max_speed before any) is a false minimum, however well it scores: a pose cannot have got there.
-  auto reachable = [&](const NdtResult& r) {
-    return (toIsometry(r.transform).translation() - held.translation()).head<2>().norm() <=
-           region.radius + config_.ndt.resolution;
-  };
+  // The bounded region (the fastest motion seen, or max_speed before any), and a voxel for the match's basin.
+  const Reach reach{held.translation().head<2>(), region.radius + config_.ndt.resolution};
   std::optional<NdtResult> best;
   auto consider = [&](std::optional<NdtResult> r) {
-    if (r && acceptable(*r) && reachable(*r) && (!best || r->nvtl > best->nvtl)) best = std::move(r);
+    if (r && acceptable(*r) && reach.holds(toIsometry(r->transform)) && (!best || r->nvtl > best->nvtl))
+      best = std::move(r);
   };
   if (fresh) {
     // A pose given by the user (rviz, a parameter) is matched from as given, the search only when that fails.
@@ -487,23 +497,12 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
       last_global_search_ = stamp;
       out.global_search = true;
       out.global_search_reason = g.reason;
-      if (g.found && (start_search || reachable(g.refinement))) {
+      if (g.found && (start_search || reach.holds(g.map_T_base))) {
         best = g.refinement;
         found_globally = g.map_T_base;
       }
     } else if (!(fresh && map_loading)) {  // a start whose map is loading is tried again, not searched from
-      BackgroundSearch job;
-      job.stamp = stamp;
-      job.track_version = track_version_;
-      job.restarts_track = fresh || long_gap;
-      job.anywhere = start_search;
-      job.held = held.translation().head<2>();
-      job.reach = region.radius + config_.ndt.resolution;
-      job.result = std::async(std::launch::async, [this, target = target_, source = source_, wide] {
-        return runSearch(target, source, searchRequest(wide));
-      });
-      search_ = std::move(job);
-      last_global_search_ = stamp;
+      startBackgroundSearch(stamp, wide, fresh || long_gap, start_search ? std::nullopt : std::optional(reach));
       out.search_started = true;
     }
   }
