@@ -162,7 +162,8 @@ reliability: fuzz-build build
 # make experiment-real: KITTI-00 keyframes (../shared/data/real/kitti00_far), both stretches: as recorded, 20 %
 #   dropped with an 8 s gap, a start 20 m and 90 deg off, a hint (sigma 20 m), no start at all.
 # make experiment-hard: simulated hand-held walks (10 Hz and 2 Hz scans) and a recording with gaps.
-# VARIANTS="kitti_s1 kitti_s1_hint20 handheld_2hz ..." runs only those; TRACKING_ARGS=--cpu-hog keeps core 1 busy.
+# VARIANTS="kitti_s1 kitti_s1_hint20 handheld_2hz ..." runs only those; TRACKING_ARGS=--cpu-hog keeps core 1 busy,
+# TRACKING_ARGS="--modes global grid_puzzle" runs only those modes (default: also grid_puzzle_rospy).
 experiment-real: build
 	@$(SETUP) python3 $(ROOT)/tools/experiment_tracking.py $(or $(VARIANTS),real) $(TRACKING_ARGS)
 

@@ -18,7 +18,8 @@ Simulated (``make experiment-hard``): 60 s of the courtyard walk (scale 0.25, se
 - ``sim_gaps``: nothing recorded for 2, 4 and 8 s, 15, 30 and 45 s into the run;
 - ``handheld_2hz_no_imu``, ``sim_gaps_no_imu``: the same without an IMU (a LiDAR-only recording).
 
-Each is run by `gpm experiment` in the global and grid puzzle modes with one NDT thread; one JSON object per
+Each is run by `gpm experiment` with one NDT thread in the global mode and both grid puzzle modes (the provider
+nodelet in the localizer's manager, and the rospy provider); ``--modes`` runs only some. One JSON object per
 variant and mode is printed and written to build/experiment_tracking/results.jsonl: the error of the published
 poses over all played scans (and, on kitti00_far, over the straight parts), the scans with a pose and those more
 than 1 m off, whether the localizer kept track (evaluation/tracking.py), the time to the first pose and its error
@@ -48,7 +49,7 @@ from grid_puzzle_localization.util.atomic import atomic_write
 ROOT = Path(__file__).resolve().parents[1]
 KITTI = SHARED_REAL_DATA / "kitti00_far"
 GPM = [sys.executable, str(ROOT / "scripts" / "gpm")]
-MODES = ("global", "grid_puzzle")
+MODES = ("global", "grid_puzzle", "grid_puzzle_rospy")
 CPU_HOG = ["taskset", "-c", "1", "python3", "-c", "while True: pass"]
 KITTI_REFERENCE = "OXTS RTK GNSS/INS (KITTI ground truth)"
 SIM_REFERENCE = "simulator ground truth"
@@ -131,7 +132,7 @@ def rounded(value: float | None, digits: int = 3) -> float | None:
     return None if value is None else round(float(value), digits)
 
 
-def figures(variant: str, scenario: Path, run: Path, hog: str | None) -> list[dict]:
+def figures(variant: str, scenario: Path, run: Path, modes: list[str], hog: str | None) -> list[dict]:
     """One row per mode."""
     summary = json.loads((run / "summary.json").read_text())
     inputs = read_scenario(scenario)
@@ -140,7 +141,7 @@ def figures(variant: str, scenario: Path, run: Path, hog: str | None) -> list[di
     kept = stamps[straight(kitti_keyframes(stamps))] if variant.startswith("kitti_") else None
     start = summary.get("start") or {}
     rows = []
-    for mode in MODES:
+    for mode in modes:
         m = summary["modes"].get(mode) or {}
         trajectory = read_tum(run / mode / "trajectory.tum")
         track = tracking(reference, trajectory, stamps, summary["max_time_diff_s"])
@@ -198,7 +199,7 @@ def stop_hog(hog: subprocess.Popen) -> None:
         hog.wait()
 
 
-def run_variants(variants: list[str], out: Path, rate: str, hog: str | None) -> int:
+def run_variants(variants: list[str], modes: list[str], out: Path, rate: str, hog: str | None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     results, written, failed = [], set(), 0
     for variant in variants:
@@ -209,7 +210,7 @@ def run_variants(variants: list[str], out: Path, rate: str, hog: str | None) -> 
             written.add(v.scenario)
         shutil.rmtree(run, ignore_errors=True)  # its tiles were cut from a map that may have been replaced
         experiment = [*GPM, "experiment", str(scenario), "-o", str(run), "--ndt-threads", "1", "--rate", rate]
-        experiment += ["--modes", *MODES, "--empty-map-seconds", "0", *v.experiment]
+        experiment += ["--modes", *modes, "--empty-map-seconds", "0", *v.experiment]
         log = out / f"{variant}_experiment.log"
         with open(log, "w") as f:
             done = subprocess.run(experiment, stdout=f, stderr=subprocess.STDOUT)
@@ -217,7 +218,7 @@ def run_variants(variants: list[str], out: Path, rate: str, hog: str | None) -> 
             failed += 1
             rows = [{"variant": variant, "cpu_hog": hog, "error": f"gpm experiment failed, see {log}"}]
         else:
-            rows = figures(variant, scenario, run, hog)
+            rows = figures(variant, scenario, run, modes, hog)
         for row in rows:
             print(json.dumps(row), flush=True)
         results += rows
@@ -230,6 +231,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("variants", nargs="+", help=f"sets ({', '.join(SETS)}) or variants ({', '.join(VARIANTS)})")
     parser.add_argument("--out", type=Path, default=ROOT / "build" / "experiment_tracking")
+    parser.add_argument("--modes", nargs="+", choices=MODES, default=list(MODES), help="modes to run (default all)")
     parser.add_argument("--rate", default="1", help="bag playback speed (default 1)")
     parser.add_argument(
         "--cpu-hog", action="store_true", help="keep core 1 busy for the whole run: " + shlex.join(CPU_HOG)
@@ -248,7 +250,7 @@ def main() -> int:
         return 2
     hog = start_hog() if args.cpu_hog else None
     try:
-        return run_variants(variants, args.out, args.rate, shlex.join(CPU_HOG) if hog else None)
+        return run_variants(variants, args.modes, args.out, args.rate, shlex.join(CPU_HOG) if hog else None)
     finally:
         if hog is not None:
             stop_hog(hog)
