@@ -83,7 +83,7 @@ class LocalizerStarvationTest(replay.DriveReplayTest):
     @classmethod
     def _on_odom(cls, msg: Odometry) -> None:
         p = msg.pose.pose.position
-        cls.poses[round(msg.header.stamp.to_sec() - START, 3)] = np.array([p.x, p.y, p.z])
+        cls.poses[replay.since_start(msg.header.stamp.to_sec())] = np.array([p.x, p.y, p.z])
 
     @classmethod
     def _on_status(cls, msg: NdtStatus) -> None:

@@ -68,7 +68,7 @@ class Stack:
         rospy.Subscriber(f"/{ns}/grid_puzzle_map_provider/status", ProviderStatus, self.provider.append)
 
     def _on_status(self, msg: NdtStatus) -> None:
-        self.statuses[round(msg.header.stamp.to_sec() - START, 3)] = msg
+        self.statuses[replay.since_start(msg.header.stamp.to_sec())] = msg
 
 
 class StartHintNoneTest(replay.DriveReplayTest):
@@ -100,7 +100,7 @@ class StartHintNoneTest(replay.DriveReplayTest):
 
     def assert_starts(self, ns: str, bound: float) -> None:
         stack = self.stacks[ns]
-        poses = {round(t - START, 3): m for t, m in stack.track.poses.items()}
+        poses = {replay.since_start(t): m for t, m in stack.track.poses.items()}
         self.assertTrue(poses, f"{ns}: no pose published ({len(stack.statuses)} statuses)")
         first = min(poses)  # [s] after the first scan (bag time START)
         truth = self.drive.pose(first)

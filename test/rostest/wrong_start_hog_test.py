@@ -55,11 +55,6 @@ YAW_TOLERANCE = np.deg2rad(5.0)  # [rad] nor turned more than this
 HOG = ["taskset", "-c", "1", "python3", "-c", "while True: pass"]
 
 
-def since_start(stamp: float) -> float:
-    """A stamp [s] as seconds from the first scan, rounded to the ms: statuses and poses of one scan compare equal."""
-    return round(stamp - START, 3)
-
-
 def tile_of(x: float, y: float) -> tuple[int, int]:
     return int(np.floor(x / S)), int(np.floor(y / S))
 
@@ -114,7 +109,7 @@ class WrongStartHogTest(replay.DriveReplayTest):
 
     @classmethod
     def _on_status(cls, msg: NdtStatus) -> None:
-        cls.statuses[since_start(msg.header.stamp.to_sec())] = msg
+        cls.statuses[replay.since_start(msg.header.stamp.to_sec())] = msg
 
     @classmethod
     def _on_provider(cls, msg: ProviderStatus) -> None:
@@ -136,7 +131,7 @@ class WrongStartHogTest(replay.DriveReplayTest):
         self.assertTrue(
             right, f"never recovered: the last pose is more than {TOLERANCE} m off (worst {error:.1f} m {where})"
         )
-        return since_start(min(right))
+        return replay.since_start(min(right))
 
     def test_the_hog_ran_for_the_whole_drive(self) -> None:
         self.assertIsNotNone(self.hog)
@@ -166,7 +161,7 @@ class WrongStartHogTest(replay.DriveReplayTest):
         self.assertTrue(all(self.statuses[t].lost for t in before), "a scan before the recovery was not reported lost")
         published = [t for t in before if self.statuses[t].published]
         self.assertEqual(published, [], "poses published before the first accepted match")
-        odom = [t for t in map(since_start, self.track.poses) if t < recovered]
+        odom = [t for t in map(replay.since_start, self.track.poses) if t < recovered]
         self.assertEqual(odom, [], "odometry published before the first accepted match")
 
     def test_recovers_within_10s_of_bag_time(self) -> None:
