@@ -69,9 +69,10 @@ class ExperimentConfig:
     initial_pose: list[float] | None = None  # x y z roll pitch yaw [m, rad]; None: first ground-truth pose
     start: StartSetting = field(default_factory=StartSetting)  # what the localizer is given (experiment.start)
     # [s] the localizer's global_localization/auto_start_timeout; None: the localizer's own (0, never) with a start
-    # pose, and start_search_timeout_s without one (hint, none), as the localizer would otherwise never search
+    # pose, and start_search_timeout_s without one (hint, none), as the localizer would otherwise never search. No
+    # pose comes in these runs (a hint is latched before the first scan), so the search starts a scan period in.
     global_search_timeout_s: float | None = None
-    start_search_timeout_s: float = 1.0
+    start_search_timeout_s: float = 0.1
     # Where the hint is published: the localizer subscribes to initialpose_hint (relative), as the providers do.
     hint_topic: str = "initialpose_hint"
     roles: NodeRoles = field(default_factory=NodeRoles)
