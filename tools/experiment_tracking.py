@@ -43,13 +43,14 @@ from shared_data import SHARED_REAL_DATA
 
 from grid_puzzle_localization.evaluation.tracking import LOST_DEG, LOST_M, tracking
 from grid_puzzle_localization.evaluation.trajectory import read_tum
+from grid_puzzle_localization.experiment.modes import DEFAULT_MODES
 from grid_puzzle_localization.experiment.scenario import read_scenario
 from grid_puzzle_localization.util.atomic import atomic_write
 
 ROOT = Path(__file__).resolve().parents[1]
 KITTI = SHARED_REAL_DATA / "kitti00_far"
 GPM = [sys.executable, str(ROOT / "scripts" / "gpm")]
-MODES = ("global", "grid_puzzle", "grid_puzzle_rospy")
+MODES = DEFAULT_MODES  # global and both grid puzzle modes; block_map starts only from a pose, as two variants do not
 CPU_HOG = ["taskset", "-c", "1", "python3", "-c", "while True: pass"]
 KITTI_REFERENCE = "OXTS RTK GNSS/INS (KITTI ground truth)"
 SIM_REFERENCE = "simulator ground truth"
