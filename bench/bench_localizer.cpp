@@ -271,8 +271,6 @@ int main(int argc, char** argv) {
       config.ndt.coarse_points = std::stoi(argv[i + 1]);
     else if (opt == "--coarse-yaw-probe")
       config.ndt.coarse_yaw_probe = std::stod(argv[i + 1]);
-    else if (opt == "--coarse-yaw-probe")
-      config.ndt.coarse_yaw_probe = std::stod(argv[i + 1]);
     else if (opt == "--max-range")
       config.preprocess.max_range = std::stod(argv[i + 1]);
     else if (opt == "--trace")
