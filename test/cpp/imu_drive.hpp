@@ -8,6 +8,7 @@
 #include <random>
 
 #include "grid_puzzle_localization/fusion/sliding_window.hpp"
+#include "grid_puzzle_localization/fusion/so3.hpp"
 
 namespace grid_puzzle_localization::imu_drive {
 

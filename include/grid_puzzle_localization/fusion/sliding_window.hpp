@@ -11,10 +11,18 @@
 #include <string>
 #include <vector>
 
-#include "grid_puzzle_localization/fusion/factors.hpp"
 #include "grid_puzzle_localization/fusion/imu_preintegration.hpp"
+#include "grid_puzzle_localization/pose_covariance.hpp"
+
+// Ceres stays out of this header (sliding_window.cpp includes fusion/factors.hpp): the localizer's header
+// includes this one, and Ceres's headers would more than double the compile time of everything that includes it.
+namespace ceres {
+class CostFunction;
+}
 
 namespace grid_puzzle_localization {
+
+class PoseManifold;
 
 struct SlidingWindowConfig {
   double gravity = 9.80665;  ///< [m/s^2] magnitude; gravity points along -z of the map frame (REP 103)

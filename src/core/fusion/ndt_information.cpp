@@ -2,6 +2,7 @@
 #include <cmath>
 
 #include "grid_puzzle_localization/fusion/sliding_window.hpp"
+#include "grid_puzzle_localization/fusion/so3.hpp"
 #include "grid_puzzle_localization/ndt.hpp"
 
 namespace grid_puzzle_localization {

@@ -8,6 +8,8 @@
 #include <stdexcept>
 #include <unordered_map>
 
+#include "grid_puzzle_localization/fusion/factors.hpp"
+
 namespace grid_puzzle_localization {
 
 struct SlidingWindow::State {
