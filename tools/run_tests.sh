@@ -27,7 +27,9 @@ run_gtest() {
 
 run_pytest() {
   echo "== pytest"
-  (cd "$gpl_root" && python3 -m pytest -q test/python --junitxml="$results/pytest/pytest.xml")
+  # Two workers (pytest-xdist), each test file on one of them: a file's module fixtures (a whole experiment run,
+  # say) run once. Every test passes with a core taken by another process, so the two share the machine.
+  (cd "$gpl_root" && python3 -m pytest -q -n 2 --dist loadfile test/python --junitxml="$results/pytest/pytest.xml")
   local rc=$?
   # 5 = no tests collected: the result check below reports that as a failure with a reason.
   ((rc == 0 || rc == 5)) || status=1
