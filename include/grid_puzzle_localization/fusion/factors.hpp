@@ -14,6 +14,7 @@
 
 #include "grid_puzzle_localization/fusion/imu_preintegration.hpp"
 #include "grid_puzzle_localization/fusion/so3.hpp"
+#include "grid_puzzle_localization/pose_covariance.hpp"
 
 namespace grid_puzzle_localization {
 
@@ -21,7 +22,6 @@ constexpr int kPoseSize = 7;
 constexpr int kPoseTangentSize = 6;
 constexpr int kSpeedBiasSize = 9;
 
-using Matrix6d = Eigen::Matrix<double, 6, 6>;
 using Matrix15d = Eigen::Matrix<double, 15, 15>;
 
 /// d(pose)/d(tangent) at `pose` (7 x 6, row-major as Ceres wants it).
