@@ -36,11 +36,12 @@ struct NdtConfig : VoxelMapParams {
   int max_iterations = 30;               ///< Newton iterations, >= 1
   double outlier_ratio = 0.55;           ///< weight of the uniform outlier term of the mixture, (0, 1)
   bool line_search = true;               ///< More-Thuente line search; false = fixed step min(|newton|, step_size)
-  /// >= 0; when the guess is not yet near a minimum (its Newton step is longer than step_size or the Hessian is not
-  /// positive definite), a source of at least twice this many points is first aligned as an even subsample of about
-  /// this many points against Gaussians twice as wide (a smoother cost with a wider basin), then in full from there
-  /// when the full scan scores that better than the guess: a guess that is far off costs passes over the subsample
-  /// instead of the scan. 0 = one stage.
+  /// >= 0, 0 = one stage; when the guess is not yet near a minimum (its Newton step is longer than step_size or the
+  /// Hessian is not positive definite), a source of at least twice this many points is first aligned as an even
+  /// subsample of about this many points: on the target's coarse map first when align() is asked to
+  /// (coarse_map_factor), then against Gaussians twice as wide (a smoother cost with a wider basin), then in full from
+  /// there when the full scan scores that better than the guess. A guess far off costs passes over the subsample
+  /// instead of the scan.
   int coarse_points = 1500;
   /// [rad] in [0, pi); the coarse stage starts from the best (by its cost) of the guess and the guess turned this far
   /// either way about its z axis. A vehicle entering a turn between keyframes is predicted 0.15-0.25 rad off in yaw,
@@ -109,10 +110,14 @@ class NdtAligner {
   const NdtConfig& config() const { return config_; }
 
   /// Aligns `source` (sensor frame, metres) to `target` starting at `guess` (T_target_source). The target must have
-  /// been built with this config's resolution. Never throws for bad data: see NdtResult::status.
-  NdtResult align(const VoxelMap& target, const PointCloud& source, const Eigen::Matrix4f& guess) const;
-  NdtResult align(const VoxelMap& target, const PointCloud& source, const Eigen::Isometry3f& guess) const {
-    return align(target, source, guess.matrix());
+  /// been built with this config's resolution. With `from_coarse_map`, the coarse stage of a guess that is not near a
+  /// minimum starts on target.coarse() (when the target has one): for a guess that may be metres off. Never throws
+  /// for bad data: see NdtResult::status.
+  NdtResult align(const VoxelMap& target, const PointCloud& source, const Eigen::Matrix4f& guess,
+                  bool from_coarse_map = false) const;
+  NdtResult align(const VoxelMap& target, const PointCloud& source, const Eigen::Isometry3f& guess,
+                  bool from_coarse_map = false) const {
+    return align(target, source, guess.matrix(), from_coarse_map);
   }
 
   /// The cost, gradient and Hessian that align() minimises, at `pose` (finite source points only). For tests and
@@ -128,8 +133,10 @@ class NdtAligner {
  private:
   /// A source of `points` finite points gets a coarse stage (NdtConfig::coarse_points).
   bool hasCoarseStage(std::size_t points) const;
-  /// The pose the coarse stage reaches from `guess` (NdtConfig::coarse_points), `guess` itself without one.
-  Vector6d coarseStage(const VoxelMap& target, const PointCloud& points, const Vector6d& guess, int* evaluations) const;
+  /// The pose the coarse stage reaches from `guess` (NdtConfig::coarse_points), `guess` itself without one. With
+  /// `from_coarse_map`, the subsample first descends against target.coarse() when there is one.
+  Vector6d coarseStage(const VoxelMap& target, const PointCloud& points, const Vector6d& guess, int* evaluations,
+                       bool from_coarse_map) const;
 
   NdtConfig config_;
 };

@@ -22,6 +22,9 @@ struct VoxelMapParams {
   int min_points_per_voxel = 6;    ///< voxels with fewer points get no Gaussian (>= 3 so a covariance exists)
   double eigenvalue_ratio = 0.01;  ///< smaller covariance eigenvalues are raised to ratio * largest, in (0, 1]
   int threads = 0;                 ///< OpenMP threads for builds and updates; 0 = all cores
+  /// 0 or in [2, 8]: each snapshot also holds its points in voxels this many times as large (VoxelMap::coarse), where
+  /// NdtAligner's coarse stage starts: a guess metres off lies within reach of those voxels. 0 = none.
+  int coarse_map_factor = 3;
 
   /// Empty when usable, else a message naming the bad value and its allowed range.
   std::string validate() const;
@@ -44,6 +47,8 @@ struct VoxelStats {
   void add(const Eigen::Vector3d& local);
   void merge(const VoxelStats& o);     ///< this += o
   void subtract(const VoxelStats& o);  ///< this -= o (o must be a part previously merged)
+  /// The same points relative to a corner `offset` [m] lower: local + offset for every point.
+  VoxelStats shifted(const Eigen::Vector3d& offset) const;
 };
 
 /// Derived Gaussian of one voxel, compact and in float for the alignment inner loop (40 bytes).
@@ -109,8 +114,11 @@ class VoxelMap {
   std::size_t voxelCount() const { return voxels_; }        ///< voxels holding at least one point
   std::size_t gaussianCount() const { return gaussians_; }  ///< voxels with a valid Gaussian
   std::size_t pointCount() const { return points_; }        ///< points summed into the map
-  std::size_t bytes() const;                                ///< heap bytes of the voxel storage
+  std::size_t bytes() const;                                ///< heap bytes of the voxel storage and the coarse map
   double bytesPerVoxel() const;                             ///< bytes() / voxelCount()
+  /// The same points in voxels params().coarse_map_factor times as large (a map without a coarse map of its own), or
+  /// nullptr (coarse_map_factor 0, no Gaussian). Lives as long as this map.
+  const VoxelMap* coarse() const { return coarse_.get(); }
   /// Calls f(key, stats, gaussian) for every voxel, in an unspecified but deterministic order.
   template <class F>
   void forEach(F&& f) const {
@@ -154,6 +162,7 @@ class VoxelMap {
   std::array<std::shared_ptr<const Shard>, kShards> shards_{};  ///< nullptr = empty shard
   std::array<ShardView, kShards> views_;
   std::size_t voxels_ = 0, gaussians_ = 0, points_ = 0;
+  std::shared_ptr<const VoxelMap> coarse_;
 };
 
 /// Identifier of a cloud added with NdtTarget::addTarget (for example a tile index).
@@ -220,6 +229,8 @@ class NdtTarget {
   /// Drops every voxel of the tiles `keys` (side `tile_size`, as in addTile).
   void removeTiles(const std::vector<TileKey>& keys, double tile_size);
   std::vector<TargetId> targetIds() const;  ///< ids currently added, ascending
+  /// Replaces the whole target by voxels already reduced to statistics (distinct keys). Forgets every added id.
+  void setStatistics(std::vector<std::pair<VoxelKey, VoxelStats>> voxels);
 
   /// The current snapshot (never null; empty before the first set/add). Thread-safe.
   std::shared_ptr<const VoxelMap> snapshot() const;
@@ -228,7 +239,8 @@ class NdtTarget {
   // Publishes `base` changed by `delta`. Only the writer replaces current_, so it may read it without the lock.
   void apply(const std::vector<std::pair<VoxelKey, VoxelStats>>& delta, bool subtract,
              std::shared_ptr<const VoxelMap> base);
-  void publish(std::shared_ptr<const VoxelMap> next);
+  // Gives `next` its coarse map (VoxelMapParams::coarse_map_factor) and makes it the snapshot.
+  void publish(std::shared_ptr<VoxelMap> next);
 
   VoxelMapParams params_;
   std::shared_ptr<const VoxelMap> current_;  // guarded by mutex_ for readers; written only by the writer
@@ -239,6 +251,11 @@ class NdtTarget {
 
 /// Groups `points` into per-voxel statistics (parallel, deterministic order). Exposed for tests/benchmarks.
 std::vector<std::pair<VoxelKey, VoxelStats>> voxelStatistics(const PointCloud& points, double resolution, int threads);
+
+/// The map of `map`'s points in voxels `factor` (>= 1) times as large, summed from its voxels' exact statistics (no
+/// points needed): coarse voxel (i, j, k) holds the fine voxels (i * factor .. i * factor + factor - 1, ...). It has no
+/// coarse map of its own.
+std::shared_ptr<const VoxelMap> coarsened(const VoxelMap& map, int factor);
 
 /// Derives the regularised Gaussian of a voxel from its statistics (unbiased n-1 covariance).
 VoxelGaussian deriveGaussian(const VoxelKey& key, const VoxelStats& stats, const VoxelMapParams& params);

@@ -42,6 +42,13 @@ Eigen::Isometry3d toIsometry(const Eigen::Matrix4f& m) {
 // before the branch-and-bound search: 0.2 s after a start at the default max_speed the bound is 4 m.
 constexpr double kHeldMatchReachVoxels = 4.0;
 
+// A prediction extrapolated over the time since the last match (a measured velocity, a recovery's last twist) is
+// metres off after dropped scans: its match starts on the target's coarse map, whose basin is that much wider. A
+// held pose (after a start) is matched without it: a scan taken on the move and not yet deskewed is smeared along
+// the motion, and from the held pose the wider basin can settle at the far end of the smear, whose velocity the
+// deskewing of the next scans then takes up (test_deskew).
+constexpr bool kFromCoarseMap = true;
+
 // Two matches land on different poses: farther apart than `distance` [m], or turned by more than 0.1 rad.
 bool distinct(const NdtResult& a, const NdtResult& b, double distance) {
   const Eigen::Isometry3d pa = toIsometry(a.transform), pb = toIsometry(b.transform);
@@ -435,7 +442,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
     consider(out.ndt);
   } else if (velocity_trusted) {
-    out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
+    out.ndt = aligner_.align(*target_, source_, guess.cast<float>(), kFromCoarseMap);
     if (!poor(out.ndt)) {
       consider(out.ndt);
     } else {
@@ -462,7 +469,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   if (velocity_unmeasured && last_twist_) {
     Eigen::Isometry3d carried = predictor_.pose() * expTwist(*last_twist_, elapsed);
     if (gyro_rotation) carried.linear() = held.linear();
-    NdtResult r = aligner_.align(*target_, source_, carried.cast<float>());
+    NdtResult r = aligner_.align(*target_, source_, carried.cast<float>(), kFromCoarseMap);
     if (!poor(r)) {
       out.ndt = r;
       consider(std::move(r));

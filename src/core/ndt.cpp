@@ -456,32 +456,48 @@ bool NdtAligner::hasCoarseStage(std::size_t points) const {
 }
 
 Vector6d NdtAligner::coarseStage(const VoxelMap& target, const PointCloud& points, const Vector6d& guess,
-                                 int* evaluations) const {
+                                 int* evaluations, bool from_coarse_map) const {
   const std::size_t n = points.size();
   if (!hasCoarseStage(n)) return guess;
   const std::size_t stride = n / static_cast<std::size_t>(config_.coarse_points);
   PointCloud sample;
   sample.reserve(n / stride + 1);
   for (std::size_t i = 0; i < n; i += stride) sample.push_back(points[i]);
+  Vector6d start = guess;
+  const VoxelMap* coarse = from_coarse_map ? target.coarse() : nullptr;
+  if (coarse) {
+    // Voxels coarse_map_factor times as large reach as much farther; the step limits grow with them.
+    Evaluator ec(*coarse, sample, config_);
+    NdtDerivatives Dc = ec.evaluate(start, true);
+    ++*evaluations;
+    if (ec.lastMatched() > 0) {
+      NdtConfig wide = config_;
+      wide.step_size *= coarse->resolution() / config_.resolution;
+      wide.max_step_size *= coarse->resolution() / config_.resolution;
+      Vector6d p = start;
+      descend(ec, wide, &p, &Dc, evaluations);
+      if (p.allFinite()) start = p;
+    }
+  }
   Evaluator ev(target, sample, config_, kCoarseWidening);
-  Vector6d p = guess;
+  Vector6d p = start;
   NdtDerivatives D = ev.evaluate(p, true);
   ++*evaluations;
-  if (ev.lastMatched() == 0) return guess;
-  // NdtConfig::coarse_yaw_probe: also the guess turned either way; the descent starts from the best of the three.
+  if (ev.lastMatched() == 0) return start;
+  // NdtConfig::coarse_yaw_probe: also the start turned either way; the descent starts from the best of the three.
   for (const double yaw : {config_.coarse_yaw_probe, -config_.coarse_yaw_probe}) {
     if (yaw == 0.0) break;
-    Vector6d start = guess;
-    start(5) += yaw;
-    const NdtDerivatives Ds = ev.evaluate(start, true);
+    Vector6d turned = start;
+    turned(5) += yaw;
+    const NdtDerivatives Dt = ev.evaluate(turned, true);
     ++*evaluations;
-    if (ev.lastMatched() > 0 && Ds.cost < D.cost) {
-      p = start;
-      D = Ds;
+    if (ev.lastMatched() > 0 && Dt.cost < D.cost) {
+      p = turned;
+      D = Dt;
     }
   }
   descend(ev, config_, &p, &D, evaluations);
-  return p.allFinite() ? p : guess;
+  return p.allFinite() ? p : start;
 }
 
 std::optional<Eigen::Isometry3d> NdtAligner::coarseAlign(const VoxelMap& target, const PointCloud& source,
@@ -491,10 +507,12 @@ std::optional<Eigen::Isometry3d> NdtAligner::coarseAlign(const VoxelMap& target,
       !guess.matrix().allFinite())
     return std::nullopt;
   int evaluations = 0;
-  return Eigen::Isometry3d(poseToMatrix(coarseStage(target, pts, matrixToPose(guess.matrix()), &evaluations)));
+  return Eigen::Isometry3d(
+      poseToMatrix(coarseStage(target, pts, matrixToPose(guess.matrix()), &evaluations, /*from_coarse_map=*/false)));
 }
 
-NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, const Eigen::Matrix4f& guess) const {
+NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, const Eigen::Matrix4f& guess,
+                            bool from_coarse_map) const {
   NdtResult r;
   const PointCloud pts = finitePoints(source);
   r.source_points = pts.size();
@@ -528,7 +546,7 @@ NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, co
   // better than the guess.
   const bool near_minimum = newtonStep(D).norm() <= config_.step_size && isPositiveDefinite(D.hessian);
   if (!near_minimum) {
-    const Vector6d coarse = coarseStage(target, pts, p, &r.coarse_evaluations);
+    const Vector6d coarse = coarseStage(target, pts, p, &r.coarse_evaluations, from_coarse_map);
     if (coarse != p) {
       const NdtDerivatives Dc = ev.evaluate(coarse, true);
       ++r.evaluations;

@@ -45,6 +45,8 @@ std::string VoxelMapParams::validate() const {
   if (!(eigenvalue_ratio > 0.0 && eigenvalue_ratio <= 1.0))
     err << "eigenvalue_ratio must be in (0, 1] (got " << eigenvalue_ratio << "); ";
   if (threads < 0) err << "threads must be >= 0, 0 = all cores (got " << threads << "); ";
+  if (coarse_map_factor != 0 && (coarse_map_factor < 2 || coarse_map_factor > 8))
+    err << "coarse_map_factor must be 0 (none) or in [2, 8] (got " << coarse_map_factor << "); ";
   return err.str();
 }
 
@@ -63,6 +65,19 @@ void VoxelStats::merge(const VoxelStats& o) {
   count += o.count;
   sum += o.sum;
   for (int i = 0; i < 6; ++i) sum_sq[i] += o.sum_sq[i];
+}
+
+VoxelStats VoxelStats::shifted(const Eigen::Vector3d& d) const {
+  // sum (l + d)(l + d)^T = sum l l^T + sum l d^T + d (sum l)^T + n d d^T, entries in the order xx xy xz yy yz zz
+  constexpr int kRow[6] = {0, 0, 0, 1, 1, 2}, kCol[6] = {0, 1, 2, 1, 2, 2};
+  VoxelStats out = *this;
+  const double n = static_cast<double>(count);
+  out.sum += n * d;
+  for (int e = 0; e < 6; ++e) {
+    const int i = kRow[e], j = kCol[e];
+    out.sum_sq[e] += sum(i) * d(j) + d(i) * sum(j) + n * d(i) * d(j);
+  }
+  return out;
 }
 
 void VoxelStats::subtract(const VoxelStats& o) {
@@ -105,7 +120,7 @@ std::size_t VoxelMap::bytes() const {
     if (s)
       b += sizeof(Shard) + s->slots.capacity() * sizeof(Shard::Slot) + s->keys.capacity() * sizeof(VoxelKey) +
            s->stats.capacity() * sizeof(VoxelStats) + s->gaussians.capacity() * sizeof(VoxelGaussian);
-  return b;
+  return coarse_ ? b + sizeof(VoxelMap) + coarse_->bytes() : b;
 }
 
 double VoxelMap::bytesPerVoxel() const {
@@ -231,7 +246,10 @@ std::shared_ptr<const VoxelMap> NdtTarget::snapshot() const {
   return current_;
 }
 
-void NdtTarget::publish(std::shared_ptr<const VoxelMap> next) {
+void NdtTarget::publish(std::shared_ptr<VoxelMap> next) {
+  next->coarse_ = params_.coarse_map_factor > 0 && next->gaussianCount() > 0
+                      ? coarsened(*next, params_.coarse_map_factor)
+                      : nullptr;
   std::lock_guard<std::mutex> lock(mutex_);
   current_ = std::move(next);
 }
@@ -241,6 +259,47 @@ void NdtTarget::setTarget(const PointCloud& points) {
   // Built on an empty base and published once: readers never see an empty map in between.
   const Delta delta = voxelStatistics(points, params_.resolution, params_.threads);
   apply(delta, false, std::make_shared<const VoxelMap>(params_));
+}
+
+void NdtTarget::setStatistics(Delta voxels) {
+  contributions_.clear();
+  // apply() takes the voxels grouped by shard.
+  std::stable_sort(voxels.begin(), voxels.end(), [](const auto& a, const auto& b) {
+    return VoxelMap::shardOf(a.first) < VoxelMap::shardOf(b.first);
+  });
+  apply(voxels, false, std::make_shared<const VoxelMap>(params_));
+}
+
+namespace {
+
+std::int64_t floorDiv(std::int64_t a, std::int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
+struct KeyHash {
+  std::size_t operator()(const VoxelKey& k) const { return static_cast<std::size_t>(VoxelMap::hash(k)); }
+};
+
+}  // namespace
+
+std::shared_ptr<const VoxelMap> coarsened(const VoxelMap& map, int factor) {
+  if (factor < 1) throw std::invalid_argument("coarsened: factor must be >= 1 (got " + std::to_string(factor) + ")");
+  VoxelMapParams params = map.params();
+  params.resolution *= factor;
+  params.coarse_map_factor = 0;
+  std::unordered_map<VoxelKey, std::size_t, KeyHash> index;
+  Delta voxels;
+  map.forEach([&](const VoxelKey& k, const VoxelStats& st, const VoxelGaussian&) {
+    const VoxelKey c{static_cast<std::int32_t>(floorDiv(k.x, factor)), static_cast<std::int32_t>(floorDiv(k.y, factor)),
+                     static_cast<std::int32_t>(floorDiv(k.z, factor))};
+    const auto [it, added] = index.emplace(c, voxels.size());
+    if (added) voxels.push_back({c, VoxelStats()});
+    // From the fine voxel's corner to the coarse one's.
+    const Eigen::Vector3d offset =
+        map.resolution() * Eigen::Vector3d(k.x - c.x * factor, k.y - c.y * factor, k.z - c.z * factor);
+    voxels[it->second].second.merge(st.shifted(offset));
+  });
+  NdtTarget target(params);
+  target.setStatistics(std::move(voxels));
+  return target.snapshot();
 }
 
 void NdtTarget::addTarget(TargetId id, const PointCloud& points) {
@@ -268,8 +327,6 @@ int voxelsPerTileSide(double tile_size, double resolution) {
 }
 
 namespace {
-
-std::int64_t floorDiv(std::int64_t a, std::int64_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
 // One int64 per tile for set lookups (exact for |i|, |j| < 2^31, like tiles/directory.py's codes).
 std::int64_t tileCode(std::int64_t i, std::int64_t j) {

@@ -137,6 +137,7 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
   load("ndt/max_step_size", c.ndt.max_step_size);
   load("ndt/coarse_points", c.ndt.coarse_points);
   load("ndt/coarse_yaw_probe", c.ndt.coarse_yaw_probe);
+  load("ndt/coarse_map_factor", c.ndt.coarse_map_factor);
   load("ndt/transformation_epsilon", c.ndt.transformation_epsilon);
   load("ndt/max_iterations", c.ndt.max_iterations);
   load("ndt/outlier_ratio", c.ndt.outlier_ratio);

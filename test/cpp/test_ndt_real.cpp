@@ -139,6 +139,50 @@ TEST(NdtRealPair, TurnEntryGuessesCostLessWithTheYawProbes) {
   EXPECT_LT(total[1], total[0]);
 }
 
+// Predictions extrapolated over dropped scans: 2-4 m off along and across the road, 0-0.1 rad in yaw. Starting on the
+// coarse map (voxels coarse_map_factor times as large), every guess reaches the reference, and the worst and the
+// total work are smaller than from the fine map alone, which does not reach it from every guess.
+TEST(NdtRealPair, FarPredictionsReachTheReferenceFromTheCoarseMap) {
+  const Eigen::Matrix4d ref = gpl::real_pair::reference();
+  const gpl::NdtConfig cfg;
+  ASSERT_GT(cfg.coarse_map_factor, 0);
+  gpl::NdtTarget target(cfg);
+  target.setTarget(gpl::real_pair::target());
+  ASSERT_NE(target.snapshot()->coarse(), nullptr);
+  const gpl::PointCloud& source = gpl::real_pair::source();
+  const double coarse_share = static_cast<double>(cfg.coarse_points) / static_cast<double>(source.size());
+  double worst[2] = {0.0, 0.0}, total[2] = {0.0, 0.0};
+  int reached[2] = {0, 0}, guesses = 0;
+  for (const double along : {-4.0, -3.0, -2.0, 2.0, 3.0, 4.0}) {
+    for (const double across : {-1.0, 0.0, 1.0}) {
+      for (const double yaw : {-0.1, 0.0, 0.1}) {
+        const Eigen::Affine3d off =
+            Eigen::Translation3d(along, across, 0.0) * Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ());
+        const Eigen::Matrix4f guess = (off.matrix() * ref).cast<float>();
+        ++guesses;
+        for (const bool from_coarse_map : {false, true}) {
+          const gpl::NdtResult r = gpl::NdtAligner(cfg).align(*target.snapshot(), source, guess, from_coarse_map);
+          const auto [te, re] = gpl::synthetic::poseError(ref, r.transform.cast<double>());
+          const bool ok = r.status == gpl::NdtResultStatus::OK && te < 0.05 && re < 0.6;
+          if (from_coarse_map)
+            EXPECT_TRUE(ok) << "along " << along << " across " << across << " yaw " << yaw << ": " << te << " m " << re
+                            << " deg, " << r.message;
+          const double work = r.evaluations + coarse_share * r.coarse_evaluations;
+          worst[from_coarse_map] = std::max(worst[from_coarse_map], work);
+          total[from_coarse_map] += work;
+          reached[from_coarse_map] += ok;
+        }
+      }
+    }
+  }
+  std::cout << "fine map only: " << reached[0] << " of " << guesses << " reached, work worst " << worst[0] << " total "
+            << total[0] << "; from the coarse map: " << reached[1] << " reached, worst " << worst[1] << " total "
+            << total[1] << std::endl;
+  EXPECT_LT(reached[0], guesses);
+  EXPECT_LT(worst[1], 0.5 * worst[0]);
+  EXPECT_LT(total[1], 0.5 * total[0]);
+}
+
 TEST(NdtRealPair, PcdReaderAndPreprocessingGiveTheExpectedClouds) {
   // About 5k of the 69,088 target points lie at the origin (no return) and must be gone before the voxel filter.
   const gpl::PointCloud raw = gpl::readPcdXyz(gpl::real_pair::dataDir() + "/251370668.pcd");

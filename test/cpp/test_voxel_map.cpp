@@ -132,6 +132,59 @@ TEST(VoxelMap, IncrementalAddRemoveEqualsFromScratch) {
   }
 }
 
+// The coarse map summed from the fine voxels equals a build of the same points at the coarse resolution, after a
+// whole-map build and after incremental changes whose coarse voxels straddle the clouds' borders.
+TEST(VoxelMap, CoarseMapEqualsABuildAtTheCoarseResolution) {
+  const gpl::PointCloud world = gpl::synthetic::scene(5, 0.02, 30000, 15.0);
+  for (const int factor : {2, 3}) {
+    gpl::VoxelMapParams fine = params(0.7);
+    fine.coarse_map_factor = factor;
+    gpl::VoxelMapParams coarse = params(0.7 * factor, 1);
+    coarse.coarse_map_factor = 0;
+    gpl::NdtTarget whole(fine), direct(coarse);
+    whole.setTarget(world);
+    direct.setTarget(world);
+    ASSERT_NE(whole.snapshot()->coarse(), nullptr) << factor;
+    EXPECT_EQ(direct.snapshot()->coarse(), nullptr);
+    EXPECT_DOUBLE_EQ(whole.snapshot()->coarse()->resolution(), 0.7 * factor);
+    expectSameMaps(*whole.snapshot()->coarse(), *direct.snapshot(), 1e-6);
+    expectSameMaps(*direct.snapshot(), *whole.snapshot()->coarse(), 1e-6);
+    EXPECT_GT(whole.snapshot()->bytes(), whole.snapshot()->coarse()->bytes() + direct.snapshot()->bytes() / 2);
+  }
+  // Clouds 3 m wide against coarse voxels of 2.1 m: added and removed at random.
+  std::vector<gpl::PointCloud> clouds;
+  for (float x0 = -15.0f; x0 < 15.0f; x0 += 3.0f) clouds.push_back(cropped(world, x0, x0 + 3.0f));
+  gpl::NdtTarget inc(params(0.7));
+  std::mt19937 rng(5);
+  std::vector<bool> present(clouds.size(), false);
+  for (int step = 0; step < 30; ++step) {
+    const std::size_t i = rng() % clouds.size();
+    if (present[i]) {
+      EXPECT_TRUE(inc.removeTarget(i));
+    } else {
+      inc.addTarget(i, clouds[i]);
+    }
+    present[i] = !present[i];
+  }
+  gpl::PointCloud remaining;
+  for (std::size_t i = 0; i < clouds.size(); ++i)
+    if (present[i]) remaining.insert(remaining.end(), clouds[i].begin(), clouds[i].end());
+  gpl::VoxelMapParams coarse = params(0.7 * gpl::VoxelMapParams().coarse_map_factor, 1);
+  coarse.coarse_map_factor = 0;
+  gpl::NdtTarget direct(coarse);
+  direct.setTarget(remaining);
+  ASSERT_NE(inc.snapshot()->coarse(), nullptr);
+  expectSameMaps(*inc.snapshot()->coarse(), *direct.snapshot(), 1e-6);
+  expectSameMaps(*direct.snapshot(), *inc.snapshot()->coarse(), 1e-6);
+  // Without a coarse map, and an empty map has none.
+  gpl::VoxelMapParams none = params(0.7);
+  none.coarse_map_factor = 0;
+  gpl::NdtTarget plain(none);
+  plain.setTarget(world);
+  EXPECT_EQ(plain.snapshot()->coarse(), nullptr);
+  EXPECT_EQ(gpl::NdtTarget(params(0.7)).snapshot()->coarse(), nullptr);
+}
+
 TEST(VoxelMap, SnapshotsAreImmutableAndShareUntouchedShards) {
   const gpl::PointCloud world = gpl::synthetic::scene(6, 0.02, 20000, 15.0);
   gpl::NdtTarget t(params(1.0));
@@ -177,6 +230,13 @@ TEST(VoxelMap, ValidateNamesTheBadValue) {
   p = gpl::VoxelMapParams();
   p.eigenvalue_ratio = 0.0;
   EXPECT_NE(p.validate().find("eigenvalue_ratio"), std::string::npos);
+  for (const int factor : {-1, 1, 9}) {
+    p = gpl::VoxelMapParams();
+    p.coarse_map_factor = factor;
+    EXPECT_NE(p.validate().find("coarse_map_factor"), std::string::npos) << factor;
+  }
+  p.coarse_map_factor = 0;
+  EXPECT_EQ(p.validate(), "");
 }
 
 }  // namespace
