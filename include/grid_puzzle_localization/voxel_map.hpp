@@ -117,7 +117,7 @@ class VoxelMap {
   std::size_t bytes() const;                                ///< heap bytes of the voxel storage and the coarse map
   double bytesPerVoxel() const;                             ///< bytes() / voxelCount()
   /// The same points in voxels params().coarse_map_factor times as large (a map without a coarse map of its own), or
-  /// nullptr (coarse_map_factor 0, no Gaussian). Lives as long as this map.
+  /// nullptr (coarse_map_factor 0, or the empty map an NdtTarget starts with). Lives as long as this map.
   const VoxelMap* coarse() const { return coarse_.get(); }
   /// Calls f(key, stats, gaussian) for every voxel, in an unspecified but deterministic order.
   template <class F>
@@ -205,6 +205,7 @@ class NdtTarget {
  public:
   /// Throws std::invalid_argument when params.validate() is not empty.
   explicit NdtTarget(const VoxelMapParams& params);
+  ~NdtTarget();
 
   /// Replaces the whole target by `points` (world frame, metres). Forgets every added id.
   void setTarget(const PointCloud& points);
@@ -229,8 +230,6 @@ class NdtTarget {
   /// Drops every voxel of the tiles `keys` (side `tile_size`, as in addTile).
   void removeTiles(const std::vector<TileKey>& keys, double tile_size);
   std::vector<TargetId> targetIds() const;  ///< ids currently added, ascending
-  /// Replaces the whole target by voxels already reduced to statistics (distinct keys). Forgets every added id.
-  void setStatistics(std::vector<std::pair<VoxelKey, VoxelStats>> voxels);
 
   /// The current snapshot (never null; empty before the first set/add). Thread-safe.
   std::shared_ptr<const VoxelMap> snapshot() const;
@@ -239,7 +238,9 @@ class NdtTarget {
   // Publishes `base` changed by `delta`. Only the writer replaces current_, so it may read it without the lock.
   void apply(const std::vector<std::pair<VoxelKey, VoxelStats>>& delta, bool subtract,
              std::shared_ptr<const VoxelMap> base);
-  // Gives `next` its coarse map (VoxelMapParams::coarse_map_factor) and makes it the snapshot.
+  // Applies the change of the fine voxels `delta` to the coarse map, whose state before it is `base`'s.
+  void applyCoarse(const std::vector<std::pair<VoxelKey, VoxelStats>>& delta, bool subtract, const VoxelMap& base);
+  // Gives `next` the coarse map's snapshot and makes it the snapshot.
   void publish(std::shared_ptr<VoxelMap> next);
 
   VoxelMapParams params_;
@@ -247,15 +248,12 @@ class NdtTarget {
   // The per-voxel statistics each id added, kept so that removal is exact.
   std::unordered_map<TargetId, std::vector<std::pair<VoxelKey, VoxelStats>>> contributions_;
   mutable std::mutex mutex_;  // guards current_ between the writer and snapshot() readers
+  // The coarse map (VoxelMapParams::coarse_map_factor; none at 0), changed by the coarse sums of each fine change.
+  std::unique_ptr<NdtTarget> coarse_;
 };
 
 /// Groups `points` into per-voxel statistics (parallel, deterministic order). Exposed for tests/benchmarks.
 std::vector<std::pair<VoxelKey, VoxelStats>> voxelStatistics(const PointCloud& points, double resolution, int threads);
-
-/// The map of `map`'s points in voxels `factor` (>= 1) times as large, summed from its voxels' exact statistics (no
-/// points needed): coarse voxel (i, j, k) holds the fine voxels (i * factor .. i * factor + factor - 1, ...). It has no
-/// coarse map of its own.
-std::shared_ptr<const VoxelMap> coarsened(const VoxelMap& map, int factor);
 
 /// Derives the regularised Gaussian of a voxel from its statistics (unbiased n-1 covariance).
 VoxelGaussian deriveGaussian(const VoxelKey& key, const VoxelStats& stats, const VoxelMapParams& params);

@@ -239,36 +239,15 @@ NdtTarget::NdtTarget(const VoxelMapParams& params) : params_(params) {
   const std::string problem = params.validate();
   if (!problem.empty()) throw std::invalid_argument("NdtTarget: " + problem);
   current_ = std::make_shared<const VoxelMap>(params_);
+  if (params_.coarse_map_factor > 0) {
+    VoxelMapParams coarse = params_;
+    coarse.resolution *= params_.coarse_map_factor;
+    coarse.coarse_map_factor = 0;
+    coarse_ = std::make_unique<NdtTarget>(coarse);
+  }
 }
 
-std::shared_ptr<const VoxelMap> NdtTarget::snapshot() const {
-  std::lock_guard<std::mutex> lock(mutex_);
-  return current_;
-}
-
-void NdtTarget::publish(std::shared_ptr<VoxelMap> next) {
-  next->coarse_ = params_.coarse_map_factor > 0 && next->gaussianCount() > 0
-                      ? coarsened(*next, params_.coarse_map_factor)
-                      : nullptr;
-  std::lock_guard<std::mutex> lock(mutex_);
-  current_ = std::move(next);
-}
-
-void NdtTarget::setTarget(const PointCloud& points) {
-  contributions_.clear();
-  // Built on an empty base and published once: readers never see an empty map in between.
-  const Delta delta = voxelStatistics(points, params_.resolution, params_.threads);
-  apply(delta, false, std::make_shared<const VoxelMap>(params_));
-}
-
-void NdtTarget::setStatistics(Delta voxels) {
-  contributions_.clear();
-  // apply() takes the voxels grouped by shard.
-  std::stable_sort(voxels.begin(), voxels.end(), [](const auto& a, const auto& b) {
-    return VoxelMap::shardOf(a.first) < VoxelMap::shardOf(b.first);
-  });
-  apply(voxels, false, std::make_shared<const VoxelMap>(params_));
-}
+NdtTarget::~NdtTarget() = default;
 
 namespace {
 
@@ -278,28 +257,53 @@ struct KeyHash {
   std::size_t operator()(const VoxelKey& k) const { return static_cast<std::size_t>(VoxelMap::hash(k)); }
 };
 
-}  // namespace
-
-std::shared_ptr<const VoxelMap> coarsened(const VoxelMap& map, int factor) {
-  if (factor < 1) throw std::invalid_argument("coarsened: factor must be >= 1 (got " + std::to_string(factor) + ")");
-  VoxelMapParams params = map.params();
-  params.resolution *= factor;
-  params.coarse_map_factor = 0;
+// The fine voxels' statistics `fine` (voxels of edge `resolution`) summed into voxels `factor` times as large, grouped
+// by shard as apply() takes them: coarse voxel (i, j, k) holds the fine voxels (i * factor .. i * factor + factor - 1,
+// ...), each shifted from its own corner to the coarse one's.
+Delta coarseDelta(const Delta& fine, double resolution, int factor) {
   std::unordered_map<VoxelKey, std::size_t, KeyHash> index;
-  Delta voxels;
-  map.forEach([&](const VoxelKey& k, const VoxelStats& st, const VoxelGaussian&) {
+  Delta out;
+  for (const auto& [k, st] : fine) {
     const VoxelKey c{static_cast<std::int32_t>(floorDiv(k.x, factor)), static_cast<std::int32_t>(floorDiv(k.y, factor)),
                      static_cast<std::int32_t>(floorDiv(k.z, factor))};
-    const auto [it, added] = index.emplace(c, voxels.size());
-    if (added) voxels.push_back({c, VoxelStats()});
-    // From the fine voxel's corner to the coarse one's.
+    const auto [it, added] = index.emplace(c, out.size());
+    if (added) out.push_back({c, VoxelStats()});
     const Eigen::Vector3d offset =
-        map.resolution() * Eigen::Vector3d(k.x - c.x * factor, k.y - c.y * factor, k.z - c.z * factor);
-    voxels[it->second].second.merge(st.shifted(offset));
+        resolution * Eigen::Vector3d(k.x - c.x * factor, k.y - c.y * factor, k.z - c.z * factor);
+    out[it->second].second.merge(st.shifted(offset));
+  }
+  std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) {
+    return VoxelMap::shardOf(a.first) < VoxelMap::shardOf(b.first);
   });
-  NdtTarget target(params);
-  target.setStatistics(std::move(voxels));
-  return target.snapshot();
+  return out;
+}
+
+}  // namespace
+
+void NdtTarget::applyCoarse(const Delta& delta, bool subtract, const VoxelMap& base) {
+  if (!coarse_) return;
+  // A map built on an empty base (setTarget) has no coarse map yet: its coarse map starts empty too.
+  std::shared_ptr<const VoxelMap> coarse_base =
+      base.coarse_ ? base.coarse_ : std::make_shared<const VoxelMap>(coarse_->params_);
+  coarse_->apply(coarseDelta(delta, params_.resolution, params_.coarse_map_factor), subtract, std::move(coarse_base));
+}
+
+std::shared_ptr<const VoxelMap> NdtTarget::snapshot() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return current_;
+}
+
+void NdtTarget::publish(std::shared_ptr<VoxelMap> next) {
+  if (coarse_) next->coarse_ = coarse_->snapshot();
+  std::lock_guard<std::mutex> lock(mutex_);
+  current_ = std::move(next);
+}
+
+void NdtTarget::setTarget(const PointCloud& points) {
+  contributions_.clear();
+  // Built on an empty base and published once: readers never see an empty map in between.
+  const Delta delta = voxelStatistics(points, params_.resolution, params_.threads);
+  apply(delta, false, std::make_shared<const VoxelMap>(params_));
 }
 
 void NdtTarget::addTarget(TargetId id, const PointCloud& points) {
@@ -438,6 +442,7 @@ void NdtTarget::removeTiles(const std::vector<TileKey>& keys, double tile_size) 
   std::shared_ptr<const VoxelMap> base = current_;
   auto next = std::make_shared<VoxelMap>(*base);
   std::vector<std::int64_t> d_vox(VoxelMap::kShards, 0), d_gauss(VoxelMap::kShards, 0), d_pts(VoxelMap::kShards, 0);
+  std::vector<Delta> removed(coarse_ ? VoxelMap::kShards : 0);  // what the coarse map loses, per shard
   const int nt = resolveThreads(params_.threads);
   // Every shard is scanned (a tile's voxels hash to all of them); only shards that lose a voxel are copied.
 #pragma omp parallel for num_threads(nt) schedule(dynamic, 16)
@@ -455,6 +460,7 @@ void NdtTarget::removeTiles(const std::vector<TileKey>& keys, double tile_size) 
         --d_vox[s];
         d_gauss[s] -= old->gaussians[i].valid;
         d_pts[s] -= old->stats[i].count;
+        if (coarse_) removed[s].emplace_back(old->keys[i], old->stats[i]);
         continue;
       }
       shard->keys.push_back(old->keys[i]);
@@ -468,6 +474,11 @@ void NdtTarget::removeTiles(const std::vector<TileKey>& keys, double tile_size) 
     next->voxels_ = static_cast<std::size_t>(static_cast<std::int64_t>(next->voxels_) + d_vox[s]);
     next->gaussians_ = static_cast<std::size_t>(static_cast<std::int64_t>(next->gaussians_) + d_gauss[s]);
     next->points_ = static_cast<std::size_t>(static_cast<std::int64_t>(next->points_) + d_pts[s]);
+  }
+  if (coarse_) {
+    Delta gone_voxels;
+    for (const Delta& d : removed) gone_voxels.insert(gone_voxels.end(), d.begin(), d.end());
+    applyCoarse(gone_voxels, true, *base);
   }
   publish(std::move(next));
 }
@@ -582,6 +593,7 @@ void NdtTarget::apply(const Delta& delta, bool subtract, std::shared_ptr<const V
     next->gaussians_ = static_cast<std::size_t>(static_cast<std::int64_t>(next->gaussians_) + d_gauss[r]);
     next->points_ = static_cast<std::size_t>(static_cast<std::int64_t>(next->points_) + d_pts[r]);
   }
+  applyCoarse(delta, subtract, *base);
   publish(std::move(next));
 }
 

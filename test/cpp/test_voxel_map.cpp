@@ -176,13 +176,42 @@ TEST(VoxelMap, CoarseMapEqualsABuildAtTheCoarseResolution) {
   ASSERT_NE(inc.snapshot()->coarse(), nullptr);
   expectSameMaps(*inc.snapshot()->coarse(), *direct.snapshot(), 1e-6);
   expectSameMaps(*direct.snapshot(), *inc.snapshot()->coarse(), 1e-6);
-  // Without a coarse map, and an empty map has none.
+  // Tiles of 2.8 m (4 voxels) against coarse voxels of 2.1 m, added by addTiles and dropped by removeTiles.
+  const double res = 0.7, side = 2.8;
+  std::map<std::pair<int, int>, gpl::PointCloud> by_tile;  // each point in the tile of its voxel
+  for (const gpl::Point& p : world)
+    by_tile[{static_cast<int>(std::floor(std::floor(p.x() * (1.0 / res)) / 4.0)),
+             static_cast<int>(std::floor(std::floor(p.y() * (1.0 / res)) / 4.0))}]
+        .push_back(p);
+  gpl::NdtTarget tiled(params(res));
+  std::map<std::pair<int, int>, bool> in;
+  for (int step = 0; step < 12; ++step) {
+    std::vector<std::pair<gpl::TileKey, const gpl::PointCloud*>> add;
+    std::vector<gpl::TileKey> drop;
+    for (const auto& [key, points] : by_tile) {
+      if (rng() % 3 != 0) continue;
+      if (in[key])
+        drop.push_back({key.first, key.second});
+      else
+        add.push_back({{key.first, key.second}, &points});
+      in[key] = !in[key];
+    }
+    EXPECT_EQ(tiled.addTiles(add, side), 0u);
+    tiled.removeTiles(drop, side);
+  }
+  gpl::PointCloud tiled_points;
+  for (const auto& [key, points] : by_tile)
+    if (in[key]) tiled_points.insert(tiled_points.end(), points.begin(), points.end());
+  gpl::NdtTarget tiled_direct(coarse);
+  tiled_direct.setTarget(tiled_points);
+  expectSameMaps(*tiled.snapshot()->coarse(), *tiled_direct.snapshot(), 1e-6);
+  expectSameMaps(*tiled_direct.snapshot(), *tiled.snapshot()->coarse(), 1e-6);
+  // Without a coarse map.
   gpl::VoxelMapParams none = params(0.7);
   none.coarse_map_factor = 0;
   gpl::NdtTarget plain(none);
   plain.setTarget(world);
   EXPECT_EQ(plain.snapshot()->coarse(), nullptr);
-  EXPECT_EQ(gpl::NdtTarget(params(0.7)).snapshot()->coarse(), nullptr);
 }
 
 TEST(VoxelMap, SnapshotsAreImmutableAndShareUntouchedShards) {
