@@ -131,10 +131,12 @@ void benchPcl(const gpl::PointCloud& target, const gpl::PointCloud& source) {
             ndt.getFinalTransformation().cast<double>(), build_ms, 0.0, ndt.hasConverged());
 }
 
-// Add and remove one 2 m x 2 m tile against a 100 m x 100 m target, versus rebuilding the whole target.
-void benchIncremental(int threads) {
+// Add and remove one 2 m x 2 m tile against a 100 m x 100 m target, versus rebuilding the whole target; with the
+// coarse map kept up (the default coarse_map_factor) or without one (0).
+void benchIncremental(int threads, int coarse_map_factor) {
   gpl::NdtConfig cfg;
   cfg.threads = threads;
+  cfg.coarse_map_factor = coarse_map_factor;
   const gpl::PointCloud world = gpl::synthetic::scene(3, 0.02, 1000000, 50.0);
   gpl::PointCloud tile;
   for (const auto& p : gpl::synthetic::scene(4, 0.02, 1000000, 50.0))
@@ -155,7 +157,8 @@ void benchIncremental(int threads) {
     remove.push_back(msSince(t0));
   }
   const auto map = target.snapshot();
-  std::cout << "{\"bench\": \"ndt_incremental\", \"threads\": " << threads << ", \"target_points\": " << world.size()
+  std::cout << "{\"bench\": \"ndt_incremental\", \"threads\": " << threads
+            << ", \"coarse_map_factor\": " << coarse_map_factor << ", \"target_points\": " << world.size()
             << ", \"target_voxels\": " << map->voxelCount() << ", \"tile_points\": " << tile.size()
             << ", \"add_tile_ms\": " << median(add) << ", \"remove_tile_ms\": " << median(remove)
             << ", \"full_rebuild_ms\": " << median(full) << ", \"bytes_per_voxel\": " << map->bytesPerVoxel() << ", "
@@ -173,7 +176,7 @@ int main(int argc, char** argv) {
   if (quick) {
     benchOurs(target, source, gpl::NdtSearchMethod::DIRECT7, 1);
     benchPcl(target, source);
-    benchIncremental(1);
+    benchIncremental(1, gpl::NdtConfig().coarse_map_factor);
     return 0;
   }
   if (only.empty() || only == "ours")
@@ -182,6 +185,7 @@ int main(int argc, char** argv) {
       for (const int threads : {1, 2}) benchOurs(target, source, m, threads);
   if (only.empty() || only == "pcl") benchPcl(target, source);
   if (only.empty() || only == "incremental")
-    for (const int threads : {1, 2}) benchIncremental(threads);
+    for (const int threads : {1, 2})
+      for (const int factor : {0, gpl::NdtConfig().coarse_map_factor}) benchIncremental(threads, factor);
   return 0;
 }
