@@ -47,6 +47,31 @@ gpl::PointCloud cropped(const gpl::PointCloud& c, float x0, float x1) {
   return out;
 }
 
+// Adds and removes `clouds` (id = index) at random, `steps` times; returns which of them the target holds at the end.
+std::vector<bool> toggleAtRandom(gpl::NdtTarget& target, const std::vector<gpl::PointCloud>& clouds, unsigned seed,
+                                 int steps) {
+  std::mt19937 rng(seed);
+  std::vector<bool> present(clouds.size(), false);
+  for (int step = 0; step < steps; ++step) {
+    const std::size_t i = rng() % clouds.size();
+    if (present[i]) {
+      EXPECT_TRUE(target.removeTarget(i));
+    } else {
+      target.addTarget(i, clouds[i]);
+    }
+    present[i] = !present[i];
+  }
+  return present;
+}
+
+// The points of the clouds marked present.
+gpl::PointCloud joined(const std::vector<gpl::PointCloud>& clouds, const std::vector<bool>& present) {
+  gpl::PointCloud out;
+  for (std::size_t i = 0; i < clouds.size(); ++i)
+    if (present[i]) out.insert(out.end(), clouds[i].begin(), clouds[i].end());
+  return out;
+}
+
 TEST(VoxelMap, GaussianMatchesBruteForceUnbiasedCovariance) {
   std::mt19937 rng(3);
   std::normal_distribution<double> n(0.0, 1.0);
@@ -106,22 +131,9 @@ TEST(VoxelMap, IncrementalAddRemoveEqualsFromScratch) {
   for (float x0 = -15.0f; x0 < 15.0f; x0 += 3.0f) tiles.push_back(cropped(world, x0, x0 + 3.0f));
   for (const double res : {2.0, 0.7}) {
     gpl::NdtTarget inc(params(res));
-    std::mt19937 rng(11);
-    std::vector<bool> present(tiles.size(), false);
-    for (int step = 0; step < 40; ++step) {
-      const std::size_t i = rng() % tiles.size();
-      if (present[i]) {
-        EXPECT_TRUE(inc.removeTarget(i));
-      } else {
-        inc.addTarget(i, tiles[i]);
-      }
-      present[i] = !present[i];
-    }
-    gpl::PointCloud remaining;
-    for (std::size_t i = 0; i < tiles.size(); ++i)
-      if (present[i]) remaining.insert(remaining.end(), tiles[i].begin(), tiles[i].end());
+    const std::vector<bool> present = toggleAtRandom(inc, tiles, 11, 40);
     gpl::NdtTarget scratch(params(res, 1));
-    scratch.setTarget(remaining);
+    scratch.setTarget(joined(tiles, present));
     expectSameMaps(*inc.snapshot(), *scratch.snapshot(), 1e-9);
     expectSameMaps(*scratch.snapshot(), *inc.snapshot(), 1e-9);
     // Removing everything leaves an empty map, not round-off residue.
@@ -155,24 +167,11 @@ TEST(VoxelMap, CoarseMapEqualsABuildAtTheCoarseResolution) {
   std::vector<gpl::PointCloud> clouds;
   for (float x0 = -15.0f; x0 < 15.0f; x0 += 3.0f) clouds.push_back(cropped(world, x0, x0 + 3.0f));
   gpl::NdtTarget inc(params(0.7));
-  std::mt19937 rng(5);
-  std::vector<bool> present(clouds.size(), false);
-  for (int step = 0; step < 30; ++step) {
-    const std::size_t i = rng() % clouds.size();
-    if (present[i]) {
-      EXPECT_TRUE(inc.removeTarget(i));
-    } else {
-      inc.addTarget(i, clouds[i]);
-    }
-    present[i] = !present[i];
-  }
-  gpl::PointCloud remaining;
-  for (std::size_t i = 0; i < clouds.size(); ++i)
-    if (present[i]) remaining.insert(remaining.end(), clouds[i].begin(), clouds[i].end());
+  const std::vector<bool> present = toggleAtRandom(inc, clouds, 5, 30);
   gpl::VoxelMapParams coarse = params(0.7 * gpl::VoxelMapParams().coarse_map_factor, 1);
   coarse.coarse_map_factor = 0;
   gpl::NdtTarget direct(coarse);
-  direct.setTarget(remaining);
+  direct.setTarget(joined(clouds, present));
   ASSERT_NE(inc.snapshot()->coarse(), nullptr);
   expectSameMaps(*inc.snapshot()->coarse(), *direct.snapshot(), 1e-6);
   expectSameMaps(*direct.snapshot(), *inc.snapshot()->coarse(), 1e-6);
@@ -185,6 +184,7 @@ TEST(VoxelMap, CoarseMapEqualsABuildAtTheCoarseResolution) {
         .push_back(p);
   gpl::NdtTarget tiled(params(res));
   std::map<std::pair<int, int>, bool> in;
+  std::mt19937 rng(5);
   for (int step = 0; step < 12; ++step) {
     std::vector<std::pair<gpl::TileKey, const gpl::PointCloud*>> add;
     std::vector<gpl::TileKey> drop;
