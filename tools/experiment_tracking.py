@@ -43,6 +43,7 @@ from shared_data import SHARED_REAL_DATA
 
 from grid_puzzle_localization.evaluation.tracking import LOST_DEG, LOST_M, tracking
 from grid_puzzle_localization.evaluation.trajectory import read_tum
+from grid_puzzle_localization.experiment.cpu_hog import CPU_HOG, start_cpu_hog, stop_cpu_hog
 from grid_puzzle_localization.experiment.modes import DEFAULT_MODES
 from grid_puzzle_localization.experiment.scenario import read_scenario
 from grid_puzzle_localization.util.atomic import atomic_write
@@ -51,7 +52,6 @@ ROOT = Path(__file__).resolve().parents[1]
 KITTI = SHARED_REAL_DATA / "kitti00_far"
 GPM = [sys.executable, str(ROOT / "scripts" / "gpm")]
 MODES = DEFAULT_MODES  # global and both grid puzzle modes; block_map starts only from a pose, as two variants do not
-CPU_HOG = ["taskset", "-c", "1", "python3", "-c", "while True: pass"]
 KITTI_REFERENCE = "OXTS RTK GNSS/INS (KITTI ground truth)"
 SIM_REFERENCE = "simulator ground truth"
 
@@ -185,21 +185,6 @@ def figures(variant: str, scenario: Path, run: Path, modes: list[str], hog: str 
     return rows
 
 
-def start_hog() -> subprocess.Popen:
-    if shutil.which("taskset") is None:
-        raise SystemExit("--cpu-hog needs taskset (util-linux)")
-    return subprocess.Popen(CPU_HOG, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-
-
-def stop_hog(hog: subprocess.Popen) -> None:
-    hog.terminate()
-    try:
-        hog.wait(5)
-    except subprocess.TimeoutExpired:
-        hog.kill()
-        hog.wait()
-
-
 def run_variants(variants: list[str], modes: list[str], out: Path, rate: str, hog: str | None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     results, written, failed = [], set(), 0
@@ -249,12 +234,15 @@ def main() -> int:
             file=sys.stderr,
         )
         return 2
-    hog = start_hog() if args.cpu_hog else None
+    try:
+        hog = start_cpu_hog() if args.cpu_hog else None
+    except RuntimeError as e:
+        parser.error(f"--cpu-hog: {e}")
     try:
         return run_variants(variants, args.modes, args.out, args.rate, shlex.join(CPU_HOG) if hog else None)
     finally:
         if hog is not None:
-            stop_hog(hog)
+            stop_cpu_hog(hog)
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@
 #include <optional>
 #include <string>
 
+#include "grid_puzzle_localization/matrix6.hpp"
 #include "grid_puzzle_localization/point_cloud.hpp"
 #include "grid_puzzle_localization/voxel_map.hpp"
 
@@ -51,9 +52,6 @@ struct NdtConfig : VoxelMapParams {
   /// Empty when usable, else a message naming each bad value and its allowed range (includes the map params).
   std::string validate() const;
 };
-
-using Vector6d = Eigen::Matrix<double, 6, 1>;
-using Matrix6d = Eigen::Matrix<double, 6, 6>;
 
 enum class NdtResultStatus {
   OK,                 ///< converged (step below transformation_epsilon)

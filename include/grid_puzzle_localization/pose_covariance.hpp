@@ -6,9 +6,9 @@
 #include <Eigen/Geometry>
 #include <string>
 
-namespace grid_puzzle_localization {
+#include "grid_puzzle_localization/matrix6.hpp"
 
-using Matrix6d = Eigen::Matrix<double, 6, 6>;
+namespace grid_puzzle_localization {
 
 struct CovarianceConfig {
   /// Multiplies inv(H). The NDT score is a robust sum over points, not a calibrated log-likelihood,

@@ -24,6 +24,7 @@
 
 #include "grid_puzzle_localization/more_thuente.hpp"
 #include "omp_threads.hpp"
+#include "packed_symmetric.hpp"
 
 namespace grid_puzzle_localization {
 namespace {
@@ -36,10 +37,9 @@ constexpr double kInlierChi2 = 11.345;        // chi2 with 3 dof at 99 %: Mahala
 constexpr std::size_t kMinMatchedVoxels = 3;  // fewer distinct Gaussians cannot pin down 6 DoF reliably
 constexpr double kMinHessianEigenRatio = 1e-9;
 
-// Symmetric 3x3 index pairs in the order xx xy xz yy yz zz.
-constexpr int kSymI[6] = {0, 0, 0, 1, 1, 2};
-constexpr int kSymJ[6] = {0, 1, 2, 1, 2, 2};
-constexpr int kSym[3][3] = {{0, 1, 2}, {1, 3, 4}, {2, 4, 5}};
+using packed_symmetric::kCol;
+using packed_symmetric::kIndex;
+using packed_symmetric::kRow;
 
 struct GaussConstants {
   double d1, d2;
@@ -307,21 +307,21 @@ class Evaluator {
     if (!hessian) return out;
     Matrix6d& H = out.hessian;
     for (int i = 0; i < 3; ++i)
-      for (int k = 0; k < 3; ++k) H(i, k) = s.A[kSym[i][k]];
+      for (int k = 0; k < 3; ++k) H(i, k) = s.A[kIndex[i][k]];
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j) {
         double v = 0.0;
         for (int k = 0; k < 3; ++k)
-          for (int l = 0; l < 3; ++l) v += rd.d[j](k, l) * s.T[3 * kSym[i][k] + l];
+          for (int l = 0; l < 3; ++l) v += rd.d[j](k, l) * s.T[3 * kIndex[i][k] + l];
         H(i, 3 + j) = H(3 + j, i) = v;
       }
     for (int u = 0; u < 6; ++u) {
-      const int i = kSymI[u], j = kSymJ[u];
+      const int i = kRow[u], j = kCol[u];
       double v = (rd.dd[u].array() * B.array()).sum();
       for (int k = 0; k < 3; ++k)
         for (int l = 0; l < 3; ++l)
           for (int m = 0; m < 3; ++m)
-            for (int n = 0; n < 3; ++n) v += rd.d[i](k, m) * rd.d[j](l, n) * s.Q[6 * kSym[k][l] + kSym[m][n]];
+            for (int n = 0; n < 3; ++n) v += rd.d[i](k, m) * rd.d[j](l, n) * s.Q[6 * kIndex[k][l] + kIndex[m][n]];
       H(3 + i, 3 + j) = H(3 + j, 3 + i) = v;
     }
     return out;

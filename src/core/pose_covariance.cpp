@@ -6,8 +6,8 @@
 namespace grid_puzzle_localization {
 namespace {
 
-Eigen::Matrix<double, 6, 1> squared(double t, double r) {
-  Eigen::Matrix<double, 6, 1> v;
+Vector6d squared(double t, double r) {
+  Vector6d v;
   v << t * t, t * t, t * t, r * r, r * r, r * r;
   return v;
 }
@@ -34,24 +34,24 @@ Matrix6d covarianceFromHessian(const Matrix6d& hessian, const CovarianceConfig& 
   const Matrix6d h = 0.5 * (hessian + hessian.transpose());
   const Eigen::SelfAdjointEigenSolver<Matrix6d> eig(h);
   if (eig.info() != Eigen::Success) return predictionCovariance(config);
-  const Eigen::Matrix<double, 6, 1> lambda = eig.eigenvalues();
+  const Vector6d lambda = eig.eigenvalues();
   const double lambda_max = lambda.cwiseAbs().maxCoeff();
-  const Eigen::Matrix<double, 6, 1> max_var = squared(config.max_translation_std, config.max_rotation_std);
+  const Vector6d max_var = squared(config.max_translation_std, config.max_rotation_std);
   // Curvatures below this are round-off or a flat direction: no information there.
   const double floor = std::max(lambda_max * 1e-12, 1e-300);
   // A flat direction carries no information: it gets the max variance projected onto it.
   Matrix6d cov = Matrix6d::Zero();
   for (int i = 0; i < 6; ++i) {
-    const Eigen::Matrix<double, 6, 1> v = eig.eigenvectors().col(i);
+    const Vector6d v = eig.eigenvectors().col(i);
     const double var = lambda(i) > floor ? config.scale / lambda(i) : v.dot(max_var.cwiseProduct(v));
     cov += var * v * v.transpose();
   }
   // Clamp each parameter's variance to its max: rescale rows and columns so the correlations stay.
-  Eigen::Matrix<double, 6, 1> s = Eigen::Matrix<double, 6, 1>::Ones();
+  Vector6d s = Vector6d::Ones();
   for (int i = 0; i < 6; ++i)
     if (cov(i, i) > max_var(i)) s(i) = std::sqrt(max_var(i) / cov(i, i));
   cov = s.asDiagonal() * cov * s.asDiagonal();
-  const Eigen::Matrix<double, 6, 1> min_var = squared(config.min_translation_std, config.min_rotation_std);
+  const Vector6d min_var = squared(config.min_translation_std, config.min_rotation_std);
   cov += min_var.asDiagonal();
   cov = 0.5 * (cov + cov.transpose());
   if (!cov.allFinite()) return predictionCovariance(config);

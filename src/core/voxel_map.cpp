@@ -8,6 +8,7 @@
 #include <unordered_set>
 
 #include "omp_threads.hpp"
+#include "packed_symmetric.hpp"
 
 namespace grid_puzzle_localization {
 namespace {
@@ -53,12 +54,7 @@ std::string VoxelMapParams::validate() const {
 void VoxelStats::add(const Eigen::Vector3d& l) {
   ++count;
   sum += l;
-  sum_sq[0] += l.x() * l.x();
-  sum_sq[1] += l.x() * l.y();
-  sum_sq[2] += l.x() * l.z();
-  sum_sq[3] += l.y() * l.y();
-  sum_sq[4] += l.y() * l.z();
-  sum_sq[5] += l.z() * l.z();
+  for (int e = 0; e < 6; ++e) sum_sq[e] += l(packed_symmetric::kRow[e]) * l(packed_symmetric::kCol[e]);
 }
 
 void VoxelStats::merge(const VoxelStats& o) {
@@ -68,13 +64,12 @@ void VoxelStats::merge(const VoxelStats& o) {
 }
 
 VoxelStats VoxelStats::shifted(const Eigen::Vector3d& d) const {
-  // sum (l + d)(l + d)^T = sum l l^T + sum l d^T + d (sum l)^T + n d d^T, entries in the order xx xy xz yy yz zz
-  constexpr int kRow[6] = {0, 0, 0, 1, 1, 2}, kCol[6] = {0, 1, 2, 1, 2, 2};
+  // sum (l + d)(l + d)^T = sum l l^T + sum l d^T + d (sum l)^T + n d d^T, entry by packed entry
   VoxelStats out = *this;
   const double n = static_cast<double>(count);
   out.sum += n * d;
   for (int e = 0; e < 6; ++e) {
-    const int i = kRow[e], j = kCol[e];
+    const int i = packed_symmetric::kRow[e], j = packed_symmetric::kCol[e];
     out.sum_sq[e] += sum(i) * d(j) + d(i) * sum(j) + n * d(i) * d(j);
   }
   return out;
@@ -137,8 +132,8 @@ VoxelGaussian deriveGaussian(const VoxelKey& key, const VoxelStats& st, const Vo
   g.mean = (corner + mean_local).cast<float>();
   if (st.count < params.min_points_per_voxel) return g;
   Eigen::Matrix3d sq;
-  sq << st.sum_sq[0], st.sum_sq[1], st.sum_sq[2], st.sum_sq[1], st.sum_sq[3], st.sum_sq[4], st.sum_sq[2], st.sum_sq[4],
-      st.sum_sq[5];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) sq(i, j) = st.sum_sq[packed_symmetric::kIndex[i][j]];
   // Unbiased sample covariance: (sum x x^T - n mean mean^T) / (n - 1).
   const Eigen::Matrix3d cov = (sq - n * mean_local * mean_local.transpose()) / (n - 1.0);
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);

@@ -40,6 +40,8 @@ from fixtures.odometry_track import OdometryTrack, angle_between
 from fixtures.synthetic_tiles import write_map_tiles
 from grid_puzzle_localization.msg import NdtStatus, ProviderStatus
 
+from grid_puzzle_localization.experiment.cpu_hog import start_cpu_hog, stop_cpu_hog
+
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "python"))
 from fault_report import record
 
@@ -52,7 +54,6 @@ TURN = np.pi / 2  # [rad] ... and turned by this much
 RECOVERY = 10.0  # [s of bag time] from the first scan to the first accepted match (see the module docstring)
 TOLERANCE = 1.0  # [m] no published pose farther from the ground truth
 YAW_TOLERANCE = np.deg2rad(5.0)  # [rad] nor turned more than this
-HOG = ["taskset", "-c", "1", "python3", "-c", "while True: pass"]
 
 
 def tile_of(x: float, y: float) -> tuple[int, int]:
@@ -85,9 +86,7 @@ class WrongStartHogTest(replay.DriveReplayTest):
         wrong = ss.pose_matrix(truth[:3, 3] + [OFFSET, 0.0, 0.0], np.arctan2(truth[1, 0], truth[0, 0]) + TURN)
         cls.wrong = wrong
         try:
-            # In a session of its own: with the kernel's autogroup scheduling a busy loop in the test's session would
-            # only compete with the test node.
-            cls.hog = subprocess.Popen(HOG, start_new_session=True)
+            cls.hog = start_cpu_hog()
             pose_pub = replay.publish_initial_pose("/initialpose", wrong)
             replay.wait_until_subscribed([pose_pub], "the localizer and the provider nodelet (one manager)")
             replay.play_bag(bag, rate=RATE, timeout=DURATION / RATE + replay.WAIT, linger=3.0)
@@ -97,9 +96,8 @@ class WrongStartHogTest(replay.DriveReplayTest):
 
     @classmethod
     def stop_hog(cls) -> None:
-        if cls.hog is not None and cls.hog.poll() is None:
-            cls.hog.kill()
-            cls.hog.wait()
+        if cls.hog is not None:
+            stop_cpu_hog(cls.hog)
 
     @classmethod
     def tearDownClass(cls) -> None:

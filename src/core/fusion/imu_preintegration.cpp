@@ -1,6 +1,7 @@
 #include "grid_puzzle_localization/fusion/imu_preintegration.hpp"
 
 #include "grid_puzzle_localization/fusion/so3.hpp"
+#include "grid_puzzle_localization/matrix6.hpp"
 
 namespace grid_puzzle_localization {
 
@@ -25,7 +26,7 @@ void ImuPreintegration::integrate(double dt, const Eigen::Vector3d& gyro, const 
   B.block<3, 3>(0, 0) = jr * dt;
   B.block<3, 3>(3, 3) = r * dt;
   B.block<3, 3>(6, 3) = 0.5 * r * dt2;
-  Eigen::Matrix<double, 6, 1> q;
+  Vector6d q;
   q << Eigen::Vector3d::Constant(gyro_variance), Eigen::Vector3d::Constant(accel_variance);
   covariance_ = A * covariance_ * A.transpose() + B * q.asDiagonal() * B.transpose();
 

@@ -9,6 +9,7 @@
 #include <unordered_map>
 
 #include "grid_puzzle_localization/fusion/factors.hpp"
+#include "grid_puzzle_localization/matrix6.hpp"
 
 namespace grid_puzzle_localization {
 
@@ -285,7 +286,7 @@ std::optional<FusedState> SlidingWindow::addScan(double stamp, const Eigen::Isom
     // it must have been estimated (a second state), not just the first state's zero-mean prior.
     if (in.stationary && config_.zupt_max_speed > 0.0 && states_.size() >= 2) {
       Eigen::Matrix<double, 9, 1> std;
-      std << Eigen::Vector3d::Constant(config_.zupt_velocity_std), Eigen::Matrix<double, 6, 1>::Constant(1e6);
+      std << Eigen::Vector3d::Constant(config_.zupt_velocity_std), Vector6d::Constant(1e6);
       addFactor(SpeedBiasPrior::create(Eigen::Matrix<double, 9, 1>::Zero(), std), {state->speed_bias});
       const Matrix6d still = Matrix6d::Identity() / (config_.zupt_pose_std * config_.zupt_pose_std);
       addFactor(RelativePoseFactor::create(Eigen::Isometry3d::Identity(), still), {prev.pose, state->pose});
