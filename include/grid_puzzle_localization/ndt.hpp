@@ -123,10 +123,11 @@ class NdtAligner {
   NdtDerivatives derivatives(const VoxelMap& target, const PointCloud& source, const Vector6d& pose) const;
 
   /// Where the coarse stage alone leads from `guess` (T_target_source): passes over the subsample against the wider
-  /// Gaussians, none over the whole source. Empty when this source has no coarse stage (coarse_points = 0, fewer than
-  /// twice as many finite points, an empty target or one of another resolution).
+  /// Gaussians, none over the whole source; with `from_coarse_map`, first against target.coarse() as in align().
+  /// Empty when this source has no coarse stage (coarse_points = 0, fewer than twice as many finite points, an empty
+  /// target or one of another resolution).
   std::optional<Eigen::Isometry3d> coarseAlign(const VoxelMap& target, const PointCloud& source,
-                                               const Eigen::Isometry3d& guess) const;
+                                               const Eigen::Isometry3d& guess, bool from_coarse_map = false) const;
 
  private:
   /// A source of `points` finite points gets a coarse stage (NdtConfig::coarse_points).

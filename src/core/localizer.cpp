@@ -291,11 +291,14 @@ std::optional<NdtResult> Localizer::tryHypotheses(const Eigen::Isometry3d& guess
   std::vector<Eigen::Isometry3d> starts = screenCandidates(aligner_, *target_, source_, guesses, screen);
   out.hypotheses = static_cast<int>(starts.size());
   // With a coarse stage, each candidate is aligned on the subsample only, the whole scan scores where each landed, and
-  // the best alone is aligned in full: one full alignment instead of one per candidate.
+  // the best alone is aligned in full: one full alignment instead of one per candidate. The candidates are a turn
+  // and metres away from the pose (the prediction's or the last pose's position), so their coarse stages start on
+  // the coarse map: from the fine map alone they took more passes and could settle where the full alignment then ran
+  // to max_iterations.
   std::optional<Eigen::Isometry3d> best_start;
   double best_cost = std::numeric_limits<double>::infinity();
   for (const Eigen::Isometry3d& g : starts) {
-    const std::optional<Eigen::Isometry3d> coarse = aligner_.coarseAlign(*target_, source_, g);
+    const std::optional<Eigen::Isometry3d> coarse = aligner_.coarseAlign(*target_, source_, g, kFromCoarseMap);
     if (!coarse) break;  // no coarse stage for this scan: every candidate is aligned in full
     const double cost = aligner_.derivatives(*target_, source_, matrixToPose(coarse->matrix())).cost;
     if (cost < best_cost) {

@@ -501,14 +501,14 @@ Vector6d NdtAligner::coarseStage(const VoxelMap& target, const PointCloud& point
 }
 
 std::optional<Eigen::Isometry3d> NdtAligner::coarseAlign(const VoxelMap& target, const PointCloud& source,
-                                                         const Eigen::Isometry3d& guess) const {
+                                                         const Eigen::Isometry3d& guess, bool from_coarse_map) const {
   const PointCloud pts = finitePoints(source);
   if (!hasCoarseStage(pts.size()) || target.resolution() != config_.resolution || target.gaussianCount() == 0 ||
       !guess.matrix().allFinite())
     return std::nullopt;
   int evaluations = 0;
   return Eigen::Isometry3d(
-      poseToMatrix(coarseStage(target, pts, matrixToPose(guess.matrix()), &evaluations, /*from_coarse_map=*/false)));
+      poseToMatrix(coarseStage(target, pts, matrixToPose(guess.matrix()), &evaluations, from_coarse_map)));
 }
 
 NdtResult NdtAligner::align(const VoxelMap& target, const PointCloud& source, const Eigen::Matrix4f& guess,
