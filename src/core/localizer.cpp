@@ -291,10 +291,10 @@ std::optional<NdtResult> Localizer::tryHypotheses(const Eigen::Isometry3d& guess
   std::vector<Eigen::Isometry3d> starts = screenCandidates(aligner_, *target_, source_, guesses, screen);
   out.hypotheses = static_cast<int>(starts.size());
   // With a coarse stage, each candidate is aligned on the subsample only, the whole scan scores where each landed, and
-  // the best alone is aligned in full: one full alignment instead of one per candidate. The candidates are a turn
-  // and metres away from the pose (the prediction's or the last pose's position), so their coarse stages start on
-  // the coarse map: from the fine map alone they took more passes and could settle where the full alignment then ran
-  // to max_iterations.
+  // the best alone is aligned in full: one full alignment instead of one per candidate. A candidate keeps the
+  // prediction's or the last pose's position, metres from the pose when the prediction is, so its coarse stage starts
+  // on the coarse map: from the fine map alone it could stop metres short, where the full alignment then ran to
+  // max_iterations (test_ndt_real).
   std::optional<Eigen::Isometry3d> best_start;
   double best_cost = std::numeric_limits<double>::infinity();
   for (const Eigen::Isometry3d& g : starts) {
