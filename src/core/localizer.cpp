@@ -43,10 +43,10 @@ Eigen::Isometry3d toIsometry(const Eigen::Matrix4f& m) {
 constexpr double kHeldMatchReachVoxels = 4.0;
 
 // A prediction extrapolated over the time since the last match (a measured velocity, a recovery's last twist) is
-// metres off after dropped scans: its match starts on the target's coarse map, whose basin is that much wider. A
-// held pose (after a start) is matched without it: a scan taken on the move and not yet deskewed is smeared along
-// the motion, and from the held pose the wider basin can settle at the far end of the smear, whose velocity the
-// deskewing of the next scans then takes up (test_deskew).
+// metres off after dropped scans: its match starts on the target's coarse map, whose basin is that much wider, as
+// do the hypotheses' candidates (tryHypotheses). A held pose (after a start) is matched without it: a scan taken on
+// the move and not yet deskewed is smeared along the motion, and from the held pose the wider basin can settle at the
+// far end of the smear, whose velocity the deskewing of the next scans then takes up (test_deskew).
 constexpr bool kFromCoarseMap = true;
 
 // Two matches land on different poses: farther apart than `distance` [m], or turned by more than 0.1 rad.

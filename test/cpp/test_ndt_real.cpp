@@ -13,6 +13,13 @@ namespace gpl = grid_puzzle_localization;
 
 namespace {
 
+// A guess off the reference by (along, across) [m] and `yaw` [rad], in the source frame.
+Eigen::Matrix4d offReference(double along, double across, double yaw) {
+  const Eigen::Affine3d off =
+      Eigen::Translation3d(along, across, 0.0) * Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ());
+  return off.matrix() * gpl::real_pair::reference();
+}
+
 gpl::NdtResult alignReal(gpl::NdtSearchMethod method) {
   gpl::NdtConfig cfg;
   cfg.search = method;
@@ -44,8 +51,7 @@ TEST(NdtRealPair, Direct7AndRadiusMatchTheReference) {
 // over the scan.
 TEST(NdtRealPair, FarGuessConvergesWithFewerPassesOverTheScan) {
   const Eigen::Matrix4d ref = gpl::real_pair::reference();
-  Eigen::Affine3d off = Eigen::Translation3d(0.9, -0.8, 0.0) * Eigen::AngleAxisd(0.07, Eigen::Vector3d::UnitZ());
-  const Eigen::Matrix4f guess = (off.matrix() * ref).cast<float>();
+  const Eigen::Matrix4f guess = offReference(0.9, -0.8, 0.07).cast<float>();
   gpl::NdtConfig fixed;
   fixed.max_step_size = fixed.step_size;
   fixed.coarse_points = 0;
@@ -77,8 +83,7 @@ TEST(NdtRealPair, FarGuessConvergesWithFewerPassesOverTheScan) {
 // decimetres of the reference, and there is none without a coarse stage.
 TEST(NdtRealPair, CoarseAlignLandsNearTheMinimum) {
   const Eigen::Matrix4d ref = gpl::real_pair::reference();
-  Eigen::Affine3d off = Eigen::Translation3d(0.9, -0.8, 0.0) * Eigen::AngleAxisd(0.07, Eigen::Vector3d::UnitZ());
-  const Eigen::Isometry3d guess(off.matrix() * ref);
+  const Eigen::Isometry3d guess(offReference(0.9, -0.8, 0.07));
   gpl::NdtConfig cfg;
   gpl::NdtTarget target(cfg);
   target.setTarget(gpl::real_pair::target());
@@ -115,9 +120,7 @@ TEST(NdtRealPair, TurnEntryGuessesCostLessWithTheYawProbes) {
   for (int step = -8; step <= 8; ++step) {
     for (const double lateral : {-1.0, 0.0, 1.0}) {
       const double yaw = 0.05 * step;
-      const Eigen::Affine3d off =
-          Eigen::Translation3d(0.5, lateral, 0.0) * Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ());
-      const Eigen::Matrix4f guess = (off.matrix() * ref).cast<float>();
+      const Eigen::Matrix4f guess = offReference(0.5, lateral, yaw).cast<float>();
       int k = 0;
       for (const gpl::NdtConfig* cfg : {&without, &with}) {
         const gpl::NdtResult r = gpl::NdtAligner(*cfg).align(*target.snapshot(), source, guess);
@@ -156,9 +159,7 @@ TEST(NdtRealPair, FarPredictionsReachTheReferenceFromTheCoarseMap) {
   for (const double along : {-4.0, -3.0, -2.0, 2.0, 3.0, 4.0}) {
     for (const double across : {-1.0, 0.0, 1.0}) {
       for (const double yaw : {-0.1, 0.0, 0.1}) {
-        const Eigen::Affine3d off =
-            Eigen::Translation3d(along, across, 0.0) * Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ());
-        const Eigen::Matrix4f guess = (off.matrix() * ref).cast<float>();
+        const Eigen::Matrix4f guess = offReference(along, across, yaw).cast<float>();
         ++guesses;
         for (const bool from_coarse_map : {false, true}) {
           const gpl::NdtResult r = gpl::NdtAligner(cfg).align(*target.snapshot(), source, guess, from_coarse_map);
@@ -195,9 +196,7 @@ TEST(NdtRealPair, CoarseAlignFromTheCoarseMapLandsNearTheMinimumFromMetresOff) {
   for (const double along : {-3.0, -2.0, -1.0, 1.0, 2.0, 3.0}) {
     for (const double across : {-1.0, 0.0, 1.0}) {
       for (const double yaw : {-0.025, 0.0, 0.025}) {
-        const Eigen::Affine3d off =
-            Eigen::Translation3d(along, across, 0.0) * Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ());
-        const Eigen::Isometry3d guess(off.matrix() * ref);
+        const Eigen::Isometry3d guess(offReference(along, across, yaw));
         ++guesses;
         for (const bool from_coarse_map : {false, true}) {
           const std::optional<Eigen::Isometry3d> coarse =
