@@ -39,6 +39,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import reference_check
 from shared_data import SHARED_REAL_DATA
 
 from grid_puzzle_localization.evaluation.tracking import LOST_DEG, LOST_M, tracking
@@ -46,6 +47,8 @@ from grid_puzzle_localization.evaluation.trajectory import read_tum
 from grid_puzzle_localization.experiment.cpu_hog import CPU_HOG, start_cpu_hog, stop_cpu_hog
 from grid_puzzle_localization.experiment.modes import DEFAULT_MODES
 from grid_puzzle_localization.experiment.scenario import read_scenario
+from grid_puzzle_localization.recordings.poses import read_poses
+from grid_puzzle_localization.recordings.scans import scan_files
 from grid_puzzle_localization.util.atomic import atomic_write
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -119,27 +122,52 @@ def scan_stamps(bag: Path) -> np.ndarray:
         return np.array([m.header.stamp.to_sec() for _, m, _ in b.read_messages(topics=["points", "/points"])])
 
 
-def kitti_keyframes(stamps: np.ndarray) -> np.ndarray:
-    """Keyframe numbers (scan file names) of the scans stamped ``stamps`` [s] (times.txt holds one time a file)."""
-    names = sorted(int(p.stem) for p in (KITTI / "scans").glob("*.pcd"))
+def kitti_indices(stamps: np.ndarray) -> np.ndarray:
+    """Lines of times.txt and poses_kitti.txt (0-based, one a scan file) of the scans stamped ``stamps`` [s]."""
     times = np.loadtxt(KITTI / "times.txt")
     nearest = np.abs(stamps[:, None] - times[None, :]).argmin(axis=1)
     if np.any(np.abs(times[nearest] - stamps) > 1e-3):
         raise RuntimeError(f"a played scan's stamp is not in {KITTI / 'times.txt'}")
-    return np.array(names)[nearest]
+    return nearest
+
+
+def kitti_keyframes(stamps: np.ndarray) -> np.ndarray:
+    """Keyframe numbers (scan file names) of the scans stamped ``stamps`` [s]."""
+    names = np.array([int(p.stem) for p in scan_files(KITTI / "scans")])
+    return names[kitti_indices(stamps)]
+
+
+def map_fit(map_path: Path, stamps: np.ndarray) -> dict:
+    """Where the experiment's map itself puts each played scan: registered onto ``map_path`` from its reference pose
+    (tools/reference_check.py's map check), how far it moves from that pose. A localizer that matches every scan
+    exactly where the map fits it has these errors against the reference; where the reference is bent (the sharp
+    turns), so is the map built from it."""
+    files = scan_files(KITTI / "scans")
+    poses, _ = read_poses(KITTI / "poses_kitti.txt", "kitti")
+    shifts = np.array(
+        [reference_check.map_shift(map_path, files[k], poses[k])["map_shift_m"] for k in kitti_indices(stamps)]
+    )
+    return {
+        "map_fit_translation_rmse_m": rounded(np.sqrt(np.mean(shifts**2))),
+        "map_fit_translation_max_m": rounded(shifts.max()),
+        f"map_fit_scans_over_{LOST_M:g}m": int((shifts > LOST_M).sum()),
+    }
 
 
 def rounded(value: float | None, digits: int = 3) -> float | None:
     return None if value is None else round(float(value), digits)
 
 
-def figures(variant: str, scenario: Path, run: Path, modes: list[str], hog: str | None) -> list[dict]:
-    """One row per mode."""
+def figures(variant: str, scenario: Path, run: Path, modes: list[str], hog: str | None, fits: dict) -> list[dict]:
+    """One row per mode. ``fits`` keeps map_fit() per scenario (the variants that only start differently share it)."""
     summary = json.loads((run / "summary.json").read_text())
     inputs = read_scenario(scenario)
     reference = read_tum(inputs.ground_truth)
     stamps = scan_stamps(inputs.bag)
-    kept = stamps[straight(kitti_keyframes(stamps))] if variant.startswith("kitti_") else None
+    kitti = variant.startswith("kitti_")
+    kept = stamps[straight(kitti_keyframes(stamps))] if kitti else None
+    if kitti and scenario not in fits:
+        fits[scenario] = map_fit(inputs.global_map, stamps)
     start = summary.get("start") or {}
     rows = []
     for mode in modes:
@@ -171,6 +199,7 @@ def figures(variant: str, scenario: Path, run: Path, modes: list[str], hog: str 
                 straight_scans_with_pose=good.published,
                 straight_translation_rmse_m=rounded(good.translation_rmse_m),
                 straight_translation_max_m=rounded(good.translation_max_m),
+                **fits[scenario],
             )
         first = m.get("start") or {}
         for key in ("first_pose", "first_accepted_pose"):
@@ -187,7 +216,7 @@ def figures(variant: str, scenario: Path, run: Path, modes: list[str], hog: str 
 
 def run_variants(variants: list[str], modes: list[str], out: Path, rate: str, hog: str | None) -> int:
     out.mkdir(parents=True, exist_ok=True)
-    results, written, failed = [], set(), 0
+    results, written, failed, fits = [], set(), 0, {}
     for variant in variants:
         v = VARIANTS[variant]
         scenario, run = out / v.scenario, out / f"{variant}_run"
@@ -204,7 +233,7 @@ def run_variants(variants: list[str], modes: list[str], out: Path, rate: str, ho
             failed += 1
             rows = [{"variant": variant, "cpu_hog": hog, "error": f"gpm experiment failed, see {log}"}]
         else:
-            rows = figures(variant, scenario, run, modes, hog)
+            rows = figures(variant, scenario, run, modes, hog, fits)
         for row in rows:
             print(json.dumps(row), flush=True)
         results += rows

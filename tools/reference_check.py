@@ -125,24 +125,23 @@ def check(scans_dir: Path, poses_path: Path, first: int, last: int) -> tuple[lis
     return rows, trusted
 
 
+def map_shift(map_path: Path, scan: Path, pose: np.ndarray) -> dict:
+    """How far the registration of ``scan`` onto ``map_path`` from its reference ``pose`` moves it."""
+    r = register(map_path, scan, pose)
+    difference = np.linalg.inv(pose) @ np.asarray(r["transform"])
+    return {
+        "status": r["status"],
+        "nvtl": round(r["nvtl"], 3),
+        "map_shift_m": round(float(np.linalg.norm(difference[:3, 3])), 3),
+        "map_turn_deg": round(float(np.degrees(Rotation.from_matrix(difference[:3, :3]).magnitude())), 3),
+    }
+
+
 def map_check(scans_dir: Path, poses_path: Path, first: int, last: int, map_path: Path) -> list[dict]:
     """Per scan k in [first, last]: how far the registration onto ``map_path`` from the reference pose moves it."""
     files = scan_files(scans_dir)
     poses, _ = read_poses(poses_path, "kitti")
-    rows = []
-    for k in range(first, last + 1):
-        r = register(map_path, files[k], poses[k])
-        difference = np.linalg.inv(poses[k]) @ np.asarray(r["transform"])
-        rows.append(
-            {
-                "scan": k,
-                "status": r["status"],
-                "nvtl": round(r["nvtl"], 3),
-                "map_shift_m": round(float(np.linalg.norm(difference[:3, 3])), 3),
-                "map_turn_deg": round(float(np.degrees(Rotation.from_matrix(difference[:3, :3]).magnitude())), 3),
-            }
-        )
-    return rows
+    return [{"scan": k, **map_shift(map_path, files[k], poses[k])} for k in range(first, last + 1)]
 
 
 def cached_check(

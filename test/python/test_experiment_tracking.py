@@ -1,10 +1,14 @@
 """tools/experiment_tracking.py without ROS playback: the straight-part selection on hand-counted keyframes, and the
-kitti00_far variants (what each imports and how each starts)."""
+kitti00_far variants (what each imports and how each starts), and the map fit on the real HDL-32E pair."""
 
 from __future__ import annotations
 
+import shutil
+
 import experiment_tracking as et
 import numpy as np
+import pytest
+import reference_check
 
 
 def test_straight_parts_leave_out_each_turn_and_its_margin():
@@ -54,3 +58,30 @@ def test_each_stretch_runs_five_variants_on_two_imports():
         assert et.VARIANTS[f"{stem}_hint20"].experiment[2:] == ("--start", "hint", "--hint-sigma", "20")
         assert et.VARIANTS[f"{stem}_none"].experiment[2:] == ("--start", "none")
     assert not any(v.startswith("mulran") for v in et.VARIANTS)
+
+
+@pytest.mark.skipif(
+    not reference_check.NDT_ALIGN.is_file(), reason="needs the built ndt_align (make build, then source tools/env.sh)"
+)
+@pytest.mark.parametrize("off_m", [0.0, 1.5])
+def test_the_map_fit_is_how_far_the_map_moves_each_played_scan_from_its_reference(
+    tmp_path, real_data, off_m, monkeypatch
+):
+    """A data set laid out as kitti00_far from the real HDL-32E pair: scan 0 is the map at pose I, scan 1 is played
+    at the pair's motion as two independent registrations measured it, then the same 1.5 m off. The map fits it within
+    the reference pair's own accuracy (test/data/SOURCES.md), then about 1.5 m from its reference."""
+    motion = np.loadtxt(real_data / "hdl32_pair" / "T_target_source_small_gicp.txt")
+    motion[0, 3] += off_m
+    data = tmp_path / "kitti"
+    (data / "scans").mkdir(parents=True)
+    shutil.copy(real_data / "hdl32_pair" / "251370668.pcd", data / "scans" / "000000.pcd")
+    shutil.copy(real_data / "hdl32_pair" / "251371071.pcd", data / "scans" / "000001.pcd")
+    (data / "poses_kitti.txt").write_text(
+        "\n".join(" ".join(f"{v:.9g}" for v in m[:3].ravel()) for m in (np.eye(4), motion)) + "\n"
+    )
+    (data / "times.txt").write_text("0.0\n0.1\n")
+    monkeypatch.setattr(et, "KITTI", data)
+    fit = et.map_fit(data / "scans" / "000000.pcd", np.array([0.1]))
+    assert fit["map_fit_translation_rmse_m"] == pytest.approx(off_m, abs=0.05)
+    assert fit["map_fit_translation_max_m"] == fit["map_fit_translation_rmse_m"]
+    assert fit["map_fit_scans_over_1m"] == (1 if off_m > 1.0 else 0)
