@@ -165,7 +165,7 @@ struct LocalizerOutput {
   bool global_search = false;
   std::string global_search_reason;  ///< why its answer was refused (empty when taken or not run)
   bool search_started = false;       ///< a background search of this scan was started (lost.background_search)
-  NdtResult ndt;                     ///< the match (status INVALID_INPUT when no match was tried)
+  NdtResult ndt;  ///< the match; when none was accepted, the last one tried (status INVALID_INPUT: none was tried)
   PreprocessReport preprocess;
   double align_ms = 0.0;  ///< NDT only
   double scan_ms = 0.0;   ///< whole processScan, including preprocessing and the swap
@@ -272,6 +272,7 @@ class Localizer {
   Preprocessor preprocessor_;
   PointCloud source_;  // the preprocessed scan in base_link, reused between scans
   NdtAligner aligner_;
+  NdtAligner carried_aligner_;  // aligner_ with at most kCarriedMatchIterations (localizer.cpp)
   MapUpdateWorker worker_;
   std::shared_ptr<const VoxelMap> target_;
   PosePredictor predictor_;

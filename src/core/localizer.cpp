@@ -49,6 +49,19 @@ constexpr double kHeldMatchReachVoxels = 4.0;
 // far end of the smear, whose velocity the deskewing of the next scans then takes up (test_deskew).
 constexpr bool kFromCoarseMap = true;
 
+// After a recovery the velocity measured before the loss carries the last accepted pose to the scan (a car driving
+// on through dropped scans). That guess is a bet: when the vehicle turned meanwhile (a search that answers a second
+// late, in a sharp turn), it is far off, and its match would run to max_iterations on every such scan while the
+// search decides anyway. It gets this many Newton iterations and must converge within them; a carried guess that
+// holds converges in two to four (the coarse stage takes it the metres).
+constexpr int kCarriedMatchIterations = 6;
+
+NdtConfig carriedMatchConfig(const NdtConfig& config) {
+  NdtConfig c = config;
+  c.max_iterations = std::min(config.max_iterations, kCarriedMatchIterations);
+  return c;
+}
+
 // Two matches land on different poses: farther apart than `distance` [m], or turned by more than 0.1 rad.
 bool distinct(const NdtResult& a, const NdtResult& b, double distance) {
   const Eigen::Isometry3d pa = toIsometry(a.transform), pb = toIsometry(b.transform);
@@ -84,6 +97,7 @@ Localizer::Localizer(const LocalizerConfig& config)
     : config_(validated(config)),
       preprocessor_(config.preprocess),
       aligner_(config.ndt),
+      carried_aligner_(carriedMatchConfig(config.ndt)),
       worker_(workerParams(config)),
       fusion_(config.fusion),
       global_(globalSearchConfig(config)) {}
@@ -472,11 +486,8 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   if (velocity_unmeasured && last_twist_) {
     Eigen::Isometry3d carried = predictor_.pose() * expTwist(*last_twist_, elapsed);
     if (gyro_rotation) carried.linear() = held.linear();
-    NdtResult r = aligner_.align(*target_, source_, carried.cast<float>(), kFromCoarseMap);
-    if (!poor(r)) {
-      out.ndt = r;
-      consider(std::move(r));
-    }
+    out.ndt = carried_aligner_.align(*target_, source_, carried.cast<float>(), kFromCoarseMap);
+    if (out.ndt.converged && !poor(out.ndt)) consider(out.ndt);
   }
   const bool held_first =
       !best && velocity_unmeasured && region.radius <= kHeldMatchReachVoxels * config_.ndt.resolution;
