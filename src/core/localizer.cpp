@@ -482,8 +482,9 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   // wrong): until a pose is accepted, only the search places the scans.
   const bool velocity_unmeasured = !fresh && !velocity_trusted && !long_gap && elapsed >= 0.0 && !start_refused_;
   // After a recovery the vehicle most likely still moves as it did before it: the match from the last accepted pose
-  // moved on by the last measured twist is tried first, under the same gate.
-  if (velocity_unmeasured && last_twist_) {
+  // moved on by the last measured twist is tried first, under the same gate. Not while a background search runs: the
+  // search was started because nothing fitted from this pose, and it decides.
+  if (velocity_unmeasured && last_twist_ && !search_) {
     Eigen::Isometry3d carried = predictor_.pose() * expTwist(*last_twist_, elapsed);
     if (gyro_rotation) carried.linear() = held.linear();
     out.ndt = carried_aligner_.align(*target_, source_, carried.cast<float>(), kFromCoarseMap);
