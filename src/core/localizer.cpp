@@ -51,8 +51,8 @@ constexpr bool kFromCoarseMap = true;
 
 // After a recovery the velocity measured before the loss carries the last accepted pose to the scan (a car driving
 // on through dropped scans). That guess is a bet: when the vehicle turned meanwhile (a search that answers a second
-// late, in a sharp turn), it is far off, and its match would run to max_iterations on every such scan while the
-// search decides anyway. It gets this many Newton iterations and must converge within them; a carried guess that
+// late, in a sharp turn), it is far off, and its match can run a dozen iterations and more on every such scan while
+// the search decides anyway. It gets this many Newton iterations and must converge within them; a carried guess that
 // holds converges in two to four (the coarse stage takes it the metres).
 constexpr int kCarriedMatchIterations = 6;
 
