@@ -158,7 +158,7 @@ struct LocalizerOutput {
   /// [s] from the last accepted match (or initial pose) before this scan; on an accepted scan that took up a
   /// background search's pose, the time without a match that the search ended.
   double since_last_match = 0.0;
-  int hypotheses = 0;      ///< candidates the hypotheses tried on this scan (after a poor match)
+  int hypotheses = 0;      ///< candidates the hypotheses descended from on this scan (after a poor match)
   bool recovered = false;  ///< accepted after lost.max_coast_time without a match
   /// The branch-and-bound search answered on this scan: it ran within it, or (lost.background_search) one
   /// started on an earlier scan finished and was taken up.

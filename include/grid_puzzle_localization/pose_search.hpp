@@ -39,4 +39,10 @@ std::vector<Eigen::Isometry3d> screenCandidates(const NdtAligner& aligner, const
                                                 const PointCloud& source, const std::vector<Eigen::Isometry3d>& all,
                                                 const SearchConfig& config);
 
+/// Whether `candidate` adds nothing to an NDT coarse stage started at `start`: it lies at start's x y (within
+/// `position_tolerance` [m]) and its rotation within `yaw_probe` [rad] of start's. The coarse stage also tries its
+/// start turned by +-NdtConfig::coarse_yaw_probe, so with that probe it reaches such a candidate's basin as well.
+bool coveredByYawProbe(const Eigen::Isometry3d& start, const Eigen::Isometry3d& candidate, double position_tolerance,
+                       double yaw_probe);
+
 }  // namespace grid_puzzle_localization

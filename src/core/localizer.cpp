@@ -303,23 +303,32 @@ std::optional<NdtResult> Localizer::tryHypotheses(const Eigen::Isometry3d& guess
       if (!g.isApprox(guess, 1e-9)) guesses.push_back(g);  // the prediction itself was matched already
   }
   std::vector<Eigen::Isometry3d> starts = screenCandidates(aligner_, *target_, source_, guesses, screen);
-  out.hypotheses = static_cast<int>(starts.size());
   // With a coarse stage, each candidate is aligned on the subsample only, the whole scan scores where each landed, and
   // the best alone is aligned in full: one full alignment instead of one per candidate. A candidate keeps the
   // prediction's or the last pose's position, metres from the pose when the prediction is, so its coarse stage starts
   // on the coarse map: from the fine map alone it could stop metres short, where the full alignment then ran to
   // max_iterations (test_ndt_real).
+  // A candidate at the position of one whose coarse stage ran, and within that stage's yaw probe of it, is skipped:
+  // the stage started from the best of that one turned either way (the best-screened candidates are often neighbouring
+  // yaw offsets at the last pose, all descending into one basin, metres away on a car).
   std::optional<Eigen::Isometry3d> best_start;
   double best_cost = std::numeric_limits<double>::infinity();
+  std::vector<Eigen::Isometry3d> descended;
   for (const Eigen::Isometry3d& g : starts) {
+    if (std::any_of(descended.begin(), descended.end(), [&](const Eigen::Isometry3d& d) {
+          return coveredByYawProbe(d, g, 0.5 * screen.step, aligner_.config().coarse_yaw_probe);
+        }))
+      continue;
     const std::optional<Eigen::Isometry3d> coarse = aligner_.coarseAlign(*target_, source_, g, kFromCoarseMap);
     if (!coarse) break;  // no coarse stage for this scan: every candidate is aligned in full
+    descended.push_back(g);
     const double cost = aligner_.derivatives(*target_, source_, matrixToPose(coarse->matrix())).cost;
     if (cost < best_cost) {
       best_cost = cost;
       best_start = coarse;
     }
   }
+  out.hypotheses = static_cast<int>(best_start ? descended.size() : starts.size());
   if (best_start) starts = {*best_start};
   std::optional<NdtResult> best;
   for (const Eigen::Isometry3d& g : starts) {

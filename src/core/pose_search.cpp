@@ -79,4 +79,11 @@ std::vector<Eigen::Isometry3d> screenCandidates(const NdtAligner& aligner, const
   return out;
 }
 
+bool coveredByYawProbe(const Eigen::Isometry3d& start, const Eigen::Isometry3d& candidate, double position_tolerance,
+                       double yaw_probe) {
+  const double apart = (candidate.translation().head<2>() - start.translation().head<2>()).norm();
+  const double turned = Eigen::AngleAxisd(start.linear().transpose() * candidate.linear()).angle();
+  return apart <= position_tolerance && turned <= yaw_probe;
+}
+
 }  // namespace grid_puzzle_localization

@@ -6,6 +6,7 @@
 #include <iostream>
 
 #include "grid_puzzle_localization/ndt.hpp"
+#include "grid_puzzle_localization/pose_search.hpp"
 #include "ndt_real_pair.hpp"
 #include "ndt_synthetic.hpp"
 
@@ -214,6 +215,36 @@ TEST(NdtRealPair, CoarseAlignFromTheCoarseMapLandsNearTheMinimumFromMetresOff) {
   std::cout << "landed: fine map only " << landed[0] << ", from the coarse map " << landed[1] << " of " << guesses
             << std::endl;
   EXPECT_LT(landed[0], guesses);
+}
+
+// The localizer's hypotheses skip a candidate at the position of one already descended and within the coarse stage's
+// yaw probe of it (pose_search.hpp coveredByYawProbe): the probe makes the two descents one. From guesses metres and
+// 0.2-0.3 rad off (a mispredicted turn), the coarse stage from the guess turned by up to the probe about the sensor
+// lands within 0.1 m and 0.5 deg of where it lands from the guess.
+TEST(NdtRealPair, CoarseStagesFromYawsWithinTheProbeLandTogether) {
+  const gpl::NdtConfig cfg;
+  gpl::NdtTarget target(cfg);
+  target.setTarget(gpl::real_pair::target());
+  const gpl::NdtAligner aligner(cfg);
+  for (const double along : {-4.0, -2.0, 2.0, 4.0}) {
+    for (const double yaw : {-0.3, -0.2, 0.2, 0.3}) {
+      const Eigen::Isometry3d start(offReference(along, 0.0, yaw));
+      const std::optional<Eigen::Isometry3d> from_start =
+          aligner.coarseAlign(*target.snapshot(), gpl::real_pair::source(), start, true);
+      ASSERT_TRUE(from_start.has_value());
+      for (const double turn :
+           {-cfg.coarse_yaw_probe, -0.5 * cfg.coarse_yaw_probe, 0.5 * cfg.coarse_yaw_probe, cfg.coarse_yaw_probe}) {
+        const Eigen::Isometry3d neighbour = start * Eigen::AngleAxisd(turn, Eigen::Vector3d::UnitZ());
+        ASSERT_TRUE(gpl::coveredByYawProbe(start, neighbour, 1e-9, cfg.coarse_yaw_probe + 1e-9));
+        const std::optional<Eigen::Isometry3d> from_neighbour =
+            aligner.coarseAlign(*target.snapshot(), gpl::real_pair::source(), neighbour, true);
+        ASSERT_TRUE(from_neighbour.has_value());
+        const auto [te, re] = gpl::synthetic::poseError(from_start->matrix(), from_neighbour->matrix());
+        EXPECT_TRUE(te < 0.1 && re < 0.5)
+            << "along " << along << " yaw " << yaw << " turned " << turn << ": " << te << " m " << re << " deg apart";
+      }
+    }
+  }
 }
 
 TEST(NdtRealPair, PcdReaderAndPreprocessingGiveTheExpectedClouds) {

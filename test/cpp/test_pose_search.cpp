@@ -78,3 +78,28 @@ TEST(SearchCandidates, GridInsideTheDiscNearestFirstWithSymmetricYaws) {
   EXPECT_LE(coarse.size(), 190u);
   EXPECT_GT(coarse.size(), 100u);
 }
+
+// A candidate is covered by a start at its x y (within the tolerance) and within the yaw probe of its rotation, about
+// the map's z axis or any other; z does not count (the search varies x y and yaw only).
+TEST(CoveredByYawProbe, SamePositionWithinTheProbeOnly) {
+  Eigen::Isometry3d start = Eigen::Isometry3d::Identity();
+  start.translation() << 4.0, -2.0, 1.0;
+  start.linear() = Eigen::AngleAxisd(1.2, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  auto turned = [&](double yaw, const Eigen::Vector3d& shift) {
+    Eigen::Isometry3d c = start;
+    c.linear() = Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) * start.linear();
+    c.translation() += shift;
+    return c;
+  };
+  const double tolerance = 0.5, probe = 0.1;
+  EXPECT_TRUE(gpl::coveredByYawProbe(start, start, tolerance, probe));
+  EXPECT_TRUE(gpl::coveredByYawProbe(start, turned(0.05, Eigen::Vector3d::Zero()), tolerance, probe));
+  EXPECT_TRUE(gpl::coveredByYawProbe(start, turned(-0.099, Eigen::Vector3d(0.3, -0.3, 0.0)), tolerance, probe));
+  EXPECT_TRUE(gpl::coveredByYawProbe(start, turned(0.0, Eigen::Vector3d(0.0, 0.0, 5.0)), tolerance, probe));
+  EXPECT_FALSE(gpl::coveredByYawProbe(start, turned(0.15, Eigen::Vector3d::Zero()), tolerance, probe));
+  EXPECT_FALSE(gpl::coveredByYawProbe(start, turned(0.0, Eigen::Vector3d(0.4, 0.4, 0.0)), tolerance, probe));
+  Eigen::Isometry3d tilted = start;
+  tilted.linear() = start.linear() * Eigen::AngleAxisd(0.2, Eigen::Vector3d::UnitX());
+  EXPECT_FALSE(gpl::coveredByYawProbe(start, tilted, tolerance, probe));
+  EXPECT_FALSE(gpl::coveredByYawProbe(start, turned(0.05, Eigen::Vector3d::Zero()), tolerance, 0.0));
+}
