@@ -49,8 +49,10 @@ struct GlobalLocalizationConfig {
   /// time, searching 9 x 9 positions x 9 yaws (2 cells and 2 yaw steps of the level above on each side) per level,
   /// and chosen among at full resolution before the NDT refinement. The default holds a 40 m square with the full
   /// circle of yaw at 0.5 m (81^2 positions x at most 503 yaws, a scan reaching max_range: 3.3e6 poses), which runs
-  /// at full resolution as before; a 200 m square runs at 2 m, 1 km at 4 m.
-  int max_poses = 4000000;
+  /// at full resolution, a wrong start's 60 m square at 1 m, a 200 m to 400 m square at 2 m, and a square of up to
+  /// 1.2 km (the bounding box of a 1 km^2 map) at 4 m. At 8 m, a real 0.9 km^2 map defeated the search: the true place
+  /// was often not among its coarse candidates (docs/global_localization.md).
+  int max_poses = 6000000;
   /// The block map paper's adapted initial score S0: greedy descents from the best coarse candidates set the
   /// pruning bound before the search. false = plain BBS (Hess et al. 2016) starting from min_score.
   bool adapted_initial_score = true;

@@ -340,14 +340,20 @@ std::size_t treeNodes(std::size_t side, std::size_t yaws, int levels, int descen
 
 }  // namespace
 
-// The default budget holds today's common search: a 40 m square with the full circle of yaw at 0.5 m, for a scan
-// reaching max_range (the automatic yaw step resolution / 40 m): 81^2 x 503 poses.
-TEST(GlobalLocalizationConfig, DefaultBudgetHoldsA40mSquareWithTheFullCircleOfYaw) {
+// The default budget holds the common search, a 40 m square with the full circle of yaw at 0.5 m, for a scan
+// reaching max_range (the automatic yaw step resolution / 40 m): 81^2 x 503 poses; a wrong start's 60 m square runs
+// at 1 m, and the whole of a 1 km^2 map (a square of 1.2 km around its bounding box) at 4 m, not 8 m.
+TEST(GlobalLocalizationConfig, DefaultBudgetHoldsA40mSquareAtFullResolutionAndA1km2MapAt4m) {
   const gpl::GlobalLocalizationConfig c;
-  const std::size_t common = posesAt(40.0, c.resolution, c.resolution / c.max_range, 0);
+  const double step = c.resolution / c.max_range;
+  const auto budget = static_cast<std::size_t>(c.max_poses);
+  const std::size_t common = posesAt(40.0, c.resolution, step, 0);
   EXPECT_EQ(common, 81u * 81u * 503u);
-  EXPECT_LE(common, static_cast<std::size_t>(c.max_poses));
-  EXPECT_GT(posesAt(50.0, c.resolution, c.resolution / c.max_range, 0), static_cast<std::size_t>(c.max_poses));
+  EXPECT_LE(common, budget);
+  EXPECT_GT(posesAt(60.0, c.resolution, step, 0), budget);
+  EXPECT_LE(posesAt(60.0, c.resolution, step, 1), budget);
+  EXPECT_GT(posesAt(1200.0, c.resolution, step, 2), budget);
+  EXPECT_LE(posesAt(1200.0, c.resolution, step, 3), budget);
   gpl::GlobalLocalizationConfig bad;
   bad.max_poses = 999;
   EXPECT_NE(bad.validate().find("max_poses"), std::string::npos) << bad.validate();
