@@ -105,6 +105,7 @@ struct GlobalSearchRequest {
   double size = 40.0;                               ///< [m] edge of the square of base positions searched, > 0
   double yaw_center = 0.0;                          ///< [rad] map frame, yaw of the base
   double yaw_range = 2.0 * 3.14159265358979323846;  ///< [rad] full width of the yaw interval; >= 2 pi = full circle
+  int threads = -1;  ///< OpenMP threads of this search, 0 = all cores; -1 = the config's `threads`
 };
 
 /// Outcome of one search. All numbers finite whatever `found`.

@@ -213,6 +213,21 @@ class Localizer {
   /// around it, as after a pose without a velocity). Scan thread only. With no scan or no map yet: not found,
   /// with the reason.
   GlobalLocalizationResult globalLocalize(const SearchRegion& region);
+  /// The automatic start of a localizer without a pose (an initialpose_hint's square, the whole map): searches as
+  /// globalLocalize does, but takes an answer only when the answer of an earlier scan's search agrees with it: the
+  /// two are no farther apart than the motion bound between their scans (prediction/max_speed and max_yaw_rate,
+  /// boundedSearchRegion) plus the search's own distance between distinct places (runner_up_distance and
+  /// runner_up_yaw); the motion between the two is then the track's velocity. An answer that no earlier one agrees
+  /// with is held for the next search and reported not found,
+  /// with the reason, and `held`. One search alone is never taken: on a large map the search can miss the true place,
+  /// and another place may then fit the scan well enough to pass every gate. Scan thread only.
+  struct StartSearch {
+    GlobalLocalizationResult search;  ///< found: the start was taken
+    bool held = false;                ///< the search answered and its answer is held for the next one to confirm
+  };
+  StartSearch searchForStart(const SearchRegion& region);
+  /// An automatic start's answer is held, waiting for a search of a later scan to agree with it.
+  bool startAwaitsConfirmation() const { return start_candidate_.has_value(); }
   /// The x y z extent of the current target's Gaussians (voxel means); empty without a map.
   std::optional<Eigen::AlignedBox3d> mapBounds() const;
   /// Whether the map held reaches around the square of half side `half` [m] about `centre` (x y, map frame):
@@ -233,9 +248,10 @@ class Localizer {
   bool acceptable(const NdtResult& r) const;
   /// The branch-and-bound search of `region` on the current source and target (the map given to it first
   /// when the target changed); found only when its refinement also passes the match gate.
-  GlobalLocalizationResult searchGlobally(const SearchRegion& region);
-  /// The request that searches `region` (at least a voxel either way, a few yaw steps either side).
-  GlobalSearchRequest searchRequest(const SearchRegion& region) const;
+  GlobalLocalizationResult searchGlobally(const GlobalSearchRequest& request);
+  /// The request that searches `region` (at least a voxel either way, a few yaw steps either side) on `threads`
+  /// (GlobalSearchRequest::threads).
+  GlobalSearchRequest searchRequest(const SearchRegion& region, int threads = -1) const;
   /// Runs `request` on `source` in `target` (the search's map rebuilt when it was another target); found only when
   /// the refinement also passes the match gate. On the background search's thread while one runs.
   GlobalLocalizationResult runSearch(const std::shared_ptr<const VoxelMap>& target, const PointCloud& source,
@@ -259,6 +275,11 @@ class Localizer {
   void noteAccepted(const NdtResult& match);
   /// Tracks from `pose` at `stamp` with no motion known yet (an initial pose, a global search's answer).
   void startFrom(const Eigen::Isometry3d& pose, double stamp, const Matrix6d& covariance, double reference_nvtl);
+  /// Starts the track at the answer of a global search of the last scan.
+  void startFromSearch(const GlobalLocalizationResult& found);
+  /// The wait for a background search and the search of `request` for the last scan, common to globalLocalize and
+  /// searchForStart.
+  GlobalLocalizationResult searchLastScan(const GlobalSearchRequest& request);
   /// The best acceptable match among the hypotheses: `held` (the last accepted pose) and yaw offsets around
   /// `guess` (the prediction) when the rotation is not known.
   std::optional<NdtResult> tryHypotheses(const Eigen::Isometry3d& guess, const Eigen::Isometry3d& held,
@@ -291,6 +312,11 @@ class Localizer {
   std::optional<double> last_global_search_;       // scan stamp of the last recovery search
   std::uint64_t track_version_ = 0;                // counts the changes of the last accepted pose
   bool start_refused_ = false;                     // the given pose held was refused by its first scan
+  struct StartCandidate {
+    Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  // an automatic start's answer (searchForStart) ...
+    double stamp = 0.0;                                      // ... for the scan of this stamp
+  };
+  std::optional<StartCandidate> start_candidate_;  // held until the search of a later scan agrees with it
   // A recovery search running on its own thread (lost.background_search). Declared last: its destructor waits for
   // the thread, which uses global_ and global_target_.
   struct BackgroundSearch {

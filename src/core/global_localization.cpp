@@ -300,7 +300,8 @@ Eigen::AlignedBox2d GlobalLocalizer::mapBounds() const {
 GlobalLocalizationResult GlobalLocalizer::localize(const PointCloud& scan, const GlobalSearchRequest& request,
                                                    const std::optional<Eigen::Vector3d>& up_in_base) const {
   const auto start = std::chrono::steady_clock::now();
-  const GlobalLocalizationConfig& cfg = config_;
+  GlobalLocalizationConfig cfg = config_;
+  if (request.threads >= 0) cfg.threads = request.threads;
   GlobalLocalizationResult result;
   if (!hasMap()) return refused(result, "no map (or a map without structure above the ground): call setMap", start);
   if (!std::isfinite(request.center_x) || !std::isfinite(request.center_y) || !(request.size > 0.0) ||

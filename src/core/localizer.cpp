@@ -128,6 +128,7 @@ void Localizer::reset() {
   source_stamp_.reset();
   motion_seen_ = MotionBounds();
   start_refused_ = false;
+  start_candidate_.reset();
   ++track_version_;
 }
 
@@ -158,7 +159,7 @@ std::optional<Eigen::Isometry3d> Localizer::lastAcceptedPose() const {
   return predictor_.pose();
 }
 
-GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
+GlobalLocalizationResult Localizer::searchGlobally(const GlobalSearchRequest& request) {
   GlobalLocalizationResult r;
   if (!target_ || target_->gaussianCount() == 0) {
     r.reason = "no map yet";
@@ -168,11 +169,12 @@ GlobalLocalizationResult Localizer::searchGlobally(const SearchRegion& region) {
     r.reason = "no scan yet";
     return r;
   }
-  return runSearch(target_, source_, searchRequest(region));
+  return runSearch(target_, source_, request);
 }
 
-GlobalSearchRequest Localizer::searchRequest(const SearchRegion& region) const {
+GlobalSearchRequest Localizer::searchRequest(const SearchRegion& region, int threads) const {
   GlobalSearchRequest request;
+  request.threads = threads;
   request.center_x = region.centre.translation().x();
   request.center_y = region.centre.translation().y();
   request.size = std::max(2.0 * region.radius, 2.0 * config_.ndt.resolution);
@@ -258,18 +260,54 @@ void Localizer::noteAccepted(const NdtResult& match) {
   ++track_version_;
 }
 
-GlobalLocalizationResult Localizer::globalLocalize(const SearchRegion& region) {
+GlobalLocalizationResult Localizer::searchLastScan(const GlobalSearchRequest& request) {
   if (search_) {  // a background search's answer would come after this one's: it is not waited for
     search_->result.wait();
     search_.reset();
   }
-  GlobalLocalizationResult r = searchGlobally(region);
-  if (!r.found) return r;
+  return searchGlobally(request);
+}
+
+void Localizer::startFromSearch(const GlobalLocalizationResult& found) {
   // The pose of the last scan, at its stamp: the next scans search around it with a radius that grows with
   // the time since (the vehicle may move while the search runs), as after any pose without a velocity.
-  startFrom(r.map_T_base, *source_stamp_, matchCovariance(r.refinement, config_.covariance), r.refinement.nvtl);
+  startFrom(found.map_T_base, *source_stamp_, matchCovariance(found.refinement, config_.covariance),
+            found.refinement.nvtl);
   fusion_.reset();  // the next scan starts a new window at the pose found
+}
+
+GlobalLocalizationResult Localizer::globalLocalize(const SearchRegion& region) {
+  GlobalLocalizationResult r = searchLastScan(searchRequest(region));
+  if (r.found) startFromSearch(r);
   return r;
+}
+
+Localizer::StartSearch Localizer::searchForStart(const SearchRegion& region) {
+  // Nothing is tracked while a start is searched for: the search takes every core.
+  GlobalLocalizationResult r = searchLastScan(searchRequest(region, 0));
+  if (!r.found) return {r, false};
+  const StartCandidate answer{r.map_T_base, *source_stamp_};
+  const std::optional<StartCandidate> earlier = std::exchange(start_candidate_, answer);
+  if (earlier) {
+    const SearchRegion reach =
+        boundedSearchRegion(earlier->pose, answer.stamp - earlier->stamp, MotionBounds(), false, config_.prediction);
+    const double apart = (answer.pose.translation() - earlier->pose.translation()).head<2>().norm();
+    const double turn = Eigen::AngleAxisd(earlier->pose.rotation().transpose() * answer.pose.rotation()).angle();
+    if (apart <= reach.radius + config_.global.runner_up_distance &&
+        turn <= reach.yaw_range + config_.global.runner_up_yaw) {
+      // The two answers also measure the motion between their scans: the next scan is predicted from it, as in
+      // tracking, instead of being searched for around a pose without a velocity.
+      startFrom(earlier->pose, earlier->stamp, matchCovariance(r.refinement, config_.covariance), r.refinement.nvtl);
+      predictor_.update(answer.pose, answer.stamp, config_.preprocess.deskew_twist_smoothing);
+      noteAccepted(r.refinement);
+      fusion_.reset();
+      return {r, false};
+    }
+  }
+  r.found = false;
+  r.reason = earlier ? "another place than the last search's answer: held until the search of a later scan agrees"
+                     : "held until the search of a later scan agrees (one search's answer alone is not taken)";
+  return {r, true};
 }
 
 void Localizer::startFrom(const Eigen::Isometry3d& pose, double stamp, const Matrix6d& covariance,
@@ -282,6 +320,7 @@ void Localizer::startFrom(const Eigen::Isometry3d& pose, double stamp, const Mat
   reference_nvtl_ = reference_nvtl;
   last_global_search_.reset();
   start_refused_ = false;
+  start_candidate_.reset();
   ++track_version_;
 }
 
@@ -524,7 +563,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
       wide.yaw_range = M_PI;
     }
     if (!config_.lost.background_search) {
-      GlobalLocalizationResult g = searchGlobally(wide);
+      GlobalLocalizationResult g = searchGlobally(searchRequest(wide));
       last_global_search_ = stamp;
       out.global_search = true;
       out.global_search_reason = g.reason;

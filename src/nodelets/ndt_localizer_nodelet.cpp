@@ -218,7 +218,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
           "points have no per-point time field '%s': scans are not deskewed (set "
           "~preprocess/time_field, or ~preprocess/deskew false to silence this)",
           params_.time_field.c_str());
-    const LocalizerOutput out =
+    LocalizerOutput out =
         localizer_->processScan(msg->header.stamp.toSec(), scan, *base_T_sensor, times ? &*times : nullptr);
     // A whole map after the first (a map_cloud, a reset tile_delta) is a block switch (block_map mode) or a reset
     // of the map source (a respawned provider, a resend): the window keeps N_r states.
@@ -230,7 +230,11 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     logFusionWarnings();
     if (out.reset) NODELET_WARN("scan time went backwards (bag loop?): localizer reset");
     reportState(out.state);
-    if (out.state == LocalizerState::kWaitingForInitialPose) maybeStartGlobalLocalization(msg->header.stamp);
+    if (out.state == LocalizerState::kWaitingForInitialPose && maybeStartGlobalLocalization(msg->header.stamp)) {
+      // The start was found for this scan: the scan is matched from it, and published like the next ones.
+      out = localizer_->processScan(msg->header.stamp.toSec(), scan, *base_T_sensor, times ? &*times : nullptr);
+      reportState(out.state);
+    }
     if (out.state != LocalizerState::kTracking) return;
     if (out.recovered)
       NODELET_WARN("recovered: matching again after %.1f s without an accepted match%s", out.since_last_match,
@@ -251,14 +255,17 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   }
 
   // Starts a global search when an initialpose_hint came while no pose is known (again every lost/search_period
-  // until one is found), or when no initial pose came within global_localization/auto_start_timeout.
-  void maybeStartGlobalLocalization(const ros::Time& stamp) {
+  // until one is found), or when no initial pose came within global_localization/auto_start_timeout. An answer is
+  // taken once the search of a later scan agrees with it (Localizer::searchForStart): while one is held, the next
+  // scan is searched at once. True when the start was taken.
+  bool maybeStartGlobalLocalization(const ros::Time& stamp) {
     const double t = stamp.toSec();
-    const bool hinted = hint_due_ && (!last_hint_search_ || t - *last_hint_search_ >= params_.core.lost.search_period ||
-                                      t < *last_hint_search_);
-    if (!hinted && !global_search_timer_.due(t)) return;
+    const bool confirming = localizer_->startAwaitsConfirmation();
+    const bool hinted =
+        hint_due_ && (confirming || !last_hint_search_ || t - *last_hint_search_ >= params_.core.lost.search_period ||
+                      t < *last_hint_search_);
+    if (!hinted && !confirming && !global_search_timer_.due(t)) return false;
     GlobalLocalize::Request req;
-    GlobalLocalize::Response res;
     const std::optional<Eigen::Vector2d> centre = hint_ ? hint_->xy : params_.global_localization.center;
     if (centre) {
       req.use_center = true;
@@ -268,11 +275,21 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       if (hint_) req.size = std::max(params_.global_localization.size, hint_->size);
     }
     if (hinted) last_hint_search_ = t;
-    onGlobalLocalize(req, res);
-    if (res.success)
+    const std::optional<SearchRegion> region = requestedRegion(req);
+    if (!region) return false;  // no map yet
+    const Localizer::StartSearch start = localizer_->searchForStart(*region);
+    const GlobalLocalizationResult& r = start.search;
+    if (r.found) {
+      logFound(r);
       hint_due_ = false;
-    else
-      global_search_timer_.failed(t);  // try again after another timeout
+    } else if (start.held) {
+      NODELET_INFO("global localization: (%.2f, %.2f) %s", r.map_T_base.translation().x(),
+                   r.map_T_base.translation().y(), r.reason.c_str());
+    } else {
+      NODELET_WARN("global localization failed: %s", r.reason.c_str());
+      global_search_timer_.failed(t);  // try again after another timeout (at once while an answer is held)
+    }
+    return r.found;
   }
 
   void onHint(const geometry_msgs::PoseWithCovarianceStamped::ConstPtr& msg) {
@@ -303,8 +320,8 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
                  hint_due_ ? ": global search at the next scan" : "");
   }
 
-  // The search region of a request: see srv/GlobalLocalize.srv.
-  bool onGlobalLocalize(GlobalLocalize::Request& req, GlobalLocalize::Response& res) {
+  // The search region of a request: see srv/GlobalLocalize.srv. None without a map.
+  std::optional<SearchRegion> requestedRegion(const GlobalLocalize::Request& req) const {
     const GlobalLocalizationParams& g = params_.global_localization;
     SearchRegion region;
     const double size = req.size > 0.0 ? req.size : g.size;
@@ -318,19 +335,30 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       region.centre.translation() = box->center();
       region.radius = 0.5 * box->sizes().head<2>().maxCoeff();
     } else {
+      return std::nullopt;
+    }
+    return region;
+  }
+
+  void logFound(const GlobalLocalizationResult& r) {
+    NODELET_INFO("global localization: (%.2f, %.2f), score %.2f, runner-up %.2f, %.2f s",
+                 r.map_T_base.translation().x(), r.map_T_base.translation().y(), r.score, r.runner_up_score, r.seconds);
+  }
+
+  bool onGlobalLocalize(GlobalLocalize::Request& req, GlobalLocalize::Response& res) {
+    const std::optional<SearchRegion> region = requestedRegion(req);
+    if (!region) {
       res.message = "no map loaded yet";
       return true;
     }
-    const GlobalLocalizationResult r = localizer_->globalLocalize(region);
+    const GlobalLocalizationResult r = localizer_->globalLocalize(*region);
     res.candidates = static_cast<std::uint32_t>(r.candidates_evaluated);
     res.score = r.score;
     res.runner_up_score = r.runner_up_score;
     res.success = r.found;
     if (r.found) {
       res.pose = tf2::toMsg(r.map_T_base);
-      NODELET_INFO("global localization: (%.2f, %.2f), score %.2f, runner-up %.2f, %.2f s",
-                   r.map_T_base.translation().x(), r.map_T_base.translation().y(), r.score, r.runner_up_score,
-                   r.seconds);
+      logFound(r);
     } else {
       res.message = r.reason;
       NODELET_WARN("global localization failed: %s", r.reason.c_str());

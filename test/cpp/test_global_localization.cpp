@@ -256,15 +256,24 @@ TEST_F(GlobalLocalizerTest, ResultDoesNotDependOnTheThreadCount) {
   one.setMap(*world_);
   const gpl::GlobalLocalizationResult a = one.localize(scan, around(0.0, 0.0));
   ASSERT_TRUE(a.found) << a.reason;
+  // The config's thread count, and a request's own (GlobalSearchRequest::threads, 0 = all cores).
+  std::vector<gpl::GlobalLocalizationResult> others;
   for (int threads : {2, 3}) {
     gpl::GlobalLocalizer many(config(threads));
     many.setMap(*world_);
-    const gpl::GlobalLocalizationResult b = many.localize(scan, around(0.0, 0.0));
+    others.push_back(many.localize(scan, around(0.0, 0.0)));
+  }
+  for (int threads : {0, 2}) {
+    gpl::GlobalSearchRequest request = around(0.0, 0.0);
+    request.threads = threads;
+    others.push_back(one.localize(scan, request));
+  }
+  for (const gpl::GlobalLocalizationResult& b : others) {
     ASSERT_TRUE(b.found) << b.reason;
-    EXPECT_EQ(a.score, b.score) << threads << " threads";
-    EXPECT_EQ(a.runner_up_score, b.runner_up_score) << threads << " threads";
-    EXPECT_LT(translationError(a.map_T_base, b.map_T_base), 1e-4) << threads << " threads";
-    EXPECT_LT(rotationError(a.map_T_base, b.map_T_base), 1e-5) << threads << " threads";
+    EXPECT_EQ(a.score, b.score);
+    EXPECT_EQ(a.runner_up_score, b.runner_up_score);
+    EXPECT_LT(translationError(a.map_T_base, b.map_T_base), 1e-4);
+    EXPECT_LT(rotationError(a.map_T_base, b.map_T_base), 1e-5);
   }
 }
 

@@ -778,6 +778,86 @@ TEST(Localizer, GlobalLocalizeSetsThePoseWithoutAnInitialPose) {
   EXPECT_LT(t::rotationError(out.pose, truth), 0.005);
 }
 
+namespace {
+
+// The whole map as the region of an automatic start without a hint.
+gpl::SearchRegion wholeMap(const gpl::Localizer& loc) {
+  gpl::SearchRegion whole;
+  whole.radius = 0.5 * loc.mapBounds()->sizes().head<2>().maxCoeff();
+  whole.centre.translation() = loc.mapBounds()->center();
+  whole.yaw_range = M_PI;
+  return whole;
+}
+
+}  // namespace
+
+// An automatic start (searchForStart) holds the first answer; the search of the next scan, 0.1 s and 0.4 m on,
+// agrees with it within the motion bound, and the track starts there with the motion between the two: the scan after
+// is predicted (4 m/s, 0.2 rad/s) and matched from the prediction.
+TEST(Localizer, AnAutomaticStartIsTakenWhenTheSearchOfALaterScanAgrees) {
+  const gpl::PointCloud world = t::makeWorld();
+  gpl::Localizer loc(testConfig());
+  loadMap(loc, world);
+  const Eigen::Isometry3d step = t::poseXYYaw(0.4, 0.0, 0.02);
+  const Eigen::Isometry3d first = t::poseXYYaw(-6.0, 4.0, -1.2), second = first * step, third = second * step;
+  loc.processScan(0.0, t::scanFrom(world, first * mount(), 30.0f, 0.01f, 910), mount());
+  const gpl::Localizer::StartSearch held = loc.searchForStart(wholeMap(loc));
+  EXPECT_FALSE(held.search.found);
+  EXPECT_TRUE(held.held);
+  EXPECT_TRUE(loc.startAwaitsConfirmation());
+  EXPECT_LT(t::translationError(held.search.map_T_base, first), 0.05);
+  EXPECT_FALSE(loc.lastAcceptedPose().has_value());
+  // Still waiting: nothing is published from the held answer.
+  EXPECT_EQ(loc.processScan(0.1, t::scanFrom(world, second * mount(), 30.0f, 0.01f, 911), mount()).state,
+            gpl::LocalizerState::kWaitingForInitialPose);
+  const gpl::Localizer::StartSearch taken = loc.searchForStart(wholeMap(loc));
+  ASSERT_TRUE(taken.search.found) << taken.search.reason;
+  EXPECT_FALSE(taken.held);
+  EXPECT_FALSE(loc.startAwaitsConfirmation());
+  const gpl::LocalizerOutput out =
+      loc.processScan(0.2, t::scanFrom(world, third * mount(), 30.0f, 0.01f, 912), mount());
+  EXPECT_TRUE(out.match_accepted);
+  EXPECT_FALSE(out.global_search);
+  EXPECT_FALSE(out.search_started);
+  EXPECT_LT(t::translationError(out.prediction, third), 0.05);
+  EXPECT_LT(t::translationError(out.pose, third), 0.05);
+  EXPECT_LT(t::rotationError(out.pose, third), 0.005);
+  EXPECT_NEAR(out.twist(0), 4.0, 0.3);
+}
+
+// Two answers farther apart than the vehicle can move between their scans are not both right: neither is taken. The
+// first stands for a place that the search took for the scan's (on a large map), the later scans come from the true
+// place 13 m away; the track starts there once two of its searches agree.
+TEST(Localizer, AnAutomaticStartIsNotTakenWhenTheSearchOfALaterScanDisagrees) {
+  const gpl::PointCloud world = t::makeWorld();
+  gpl::Localizer loc(testConfig());
+  loadMap(loc, world);
+  const Eigen::Isometry3d elsewhere = t::poseXYYaw(-6.0, 4.0, -1.2), truth = standingPose();
+  loc.processScan(0.0, t::scanFrom(world, elsewhere * mount(), 30.0f, 0.01f, 920), mount());
+  ASSERT_TRUE(loc.searchForStart(wholeMap(loc)).held);
+  // 0.1 s later the motion bound (prediction/min_radius + max_speed * 0.1 s, and the search's runner_up_distance) is
+  // 4.5 m: the answer 13 m away is held in its place, and nothing is taken.
+  loc.processScan(0.1, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 921), mount());
+  const gpl::Localizer::StartSearch disagreeing = loc.searchForStart(wholeMap(loc));
+  EXPECT_FALSE(disagreeing.search.found);
+  EXPECT_TRUE(disagreeing.held);
+  EXPECT_NE(disagreeing.search.reason.find("another place"), std::string::npos) << disagreeing.search.reason;
+  EXPECT_LT(t::translationError(disagreeing.search.map_T_base, truth), 0.05);
+  EXPECT_FALSE(loc.lastAcceptedPose().has_value());
+  loc.processScan(0.2, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 922), mount());
+  ASSERT_TRUE(loc.searchForStart(wholeMap(loc)).search.found);
+  const gpl::LocalizerOutput out =
+      loc.processScan(0.3, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 923), mount());
+  EXPECT_TRUE(out.match_accepted);
+  EXPECT_LT(t::translationError(out.pose, truth), 0.05);
+  // A reset forgets a held answer.
+  loc.reset();
+  loc.processScan(1.0, t::scanFrom(world, truth * mount(), 30.0f, 0.01f, 924), mount());
+  ASSERT_TRUE(loc.searchForStart(wholeMap(loc)).held);
+  loc.reset();
+  EXPECT_FALSE(loc.startAwaitsConfirmation());
+}
+
 TEST(Localizer, SearchStructuresAreReleasedWithTheMapTheyWereBuiltFrom) {
   // In tiles mode the target changes as the window moves: structures built for an old window are never used again
   // and would keep that window's voxels alive. A static map keeps them (a later search reuses them).
