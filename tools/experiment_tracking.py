@@ -10,7 +10,9 @@ run in five variants per stretch ``s1`` and ``s2``:
 - ``kitti_s1_drop20_gap8``: 20 % of the played scans dropped at random and 8 s cut in the middle of the drive;
 - ``kitti_s1_offset20_90``: started 20 m off in a seeded random direction and turned by 90 deg;
 - ``kitti_s1_hint20``: no start pose, a hint 20 m sigma from the start on initialpose_hint;
-- ``kitti_s1_none``: no start pose and no hint: the localizer's global search over its map.
+- ``kitti_s1_none``: no start pose and no hint: the localizer's global search over its map;
+- ``kitti_s1_none_campus``: the same in a map of the size a start without a pose must handle (up to 1 km^2): the
+  stretch's map inside the real Nova campus map of ../shared/data/real/nova_utd_tiles (campus_map()).
 Grid puzzle mode uses the urban preset's window (n 25, k 20, s 2 m), as a car's scans reach far.
 
 Simulated (``make experiment-hard``): 60 s of the courtyard walk (scale 0.25, seed 0) from `gpm simulate`,
@@ -40,19 +42,26 @@ from pathlib import Path
 
 import numpy as np
 import reference_check
+from scipy.ndimage import distance_transform_edt
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
 from shared_data import SHARED_REAL_DATA
 
 from grid_puzzle_localization.evaluation.tracking import LOST_DEG, LOST_M, tracking
-from grid_puzzle_localization.evaluation.trajectory import read_tum
+from grid_puzzle_localization.evaluation.trajectory import Trajectory, make_trajectory, read_tum
 from grid_puzzle_localization.experiment.cpu_hog import CPU_HOG, start_cpu_hog, stop_cpu_hog
 from grid_puzzle_localization.experiment.modes import DEFAULT_MODES
 from grid_puzzle_localization.experiment.scenario import read_scenario
+from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array, xyz_records
 from grid_puzzle_localization.recordings.poses import read_poses
 from grid_puzzle_localization.recordings.scans import scan_files
 from grid_puzzle_localization.util.atomic import atomic_write
 
 ROOT = Path(__file__).resolve().parents[1]
 KITTI = SHARED_REAL_DATA / "kitti00_far"
+CAMPUS = SHARED_REAL_DATA / "nova_utd_tiles" / "tiles"  # a real campus map in 25 m tiles, 1.05 km x 0.86 km
+CAMPUS_CELL_M = 5.0  # [m] occupancy cells that locate the campus's largest empty disc
+CAMPUS_CLEARANCE_M = 50.0  # [m] the stretch's map and the campus's points stay at least this far apart
 GPM = [sys.executable, str(ROOT / "scripts" / "gpm")]
 MODES = DEFAULT_MODES  # global and both grid puzzle modes; block_map starts only from a pose, as two variants do not
 KITTI_REFERENCE = "OXTS RTK GNSS/INS (KITTI ground truth)"
@@ -82,6 +91,7 @@ class Variant:
     command: tuple[str, ...]  # gpm command and arguments that write the scenario
     experiment: tuple[str, ...]  # extra arguments of gpm experiment
     reference: str
+    campus: bool = False  # run on the scenario's map inside the campus map (campus_map())
 
 
 def kitti_variants(name: str, first: int, last: int, gap_at: float) -> dict[str, Variant]:
@@ -96,6 +106,7 @@ def kitti_variants(name: str, first: int, last: int, gap_at: float) -> dict[str,
         f"{stem}_offset20_90": Variant(stem, base, (*urban, "--start-offset", "20", "90"), KITTI_REFERENCE),
         f"{stem}_hint20": Variant(stem, base, (*urban, "--start", "hint", "--hint-sigma", "20"), KITTI_REFERENCE),
         f"{stem}_none": Variant(stem, base, (*urban, "--start", "none"), KITTI_REFERENCE),
+        f"{stem}_none_campus": Variant(stem, base, (*urban, "--start", "none"), KITTI_REFERENCE, campus=True),
     }
 
 
@@ -137,21 +148,53 @@ def kitti_keyframes(stamps: np.ndarray) -> np.ndarray:
     return names[kitti_indices(stamps)]
 
 
-def map_fit(map_path: Path, stamps: np.ndarray) -> dict:
+@dataclass(frozen=True)
+class MapFit:
+    figures: dict  # the map fit's errors against the reference (row fields)
+    poses: Trajectory  # where the map puts each played scan, at its stamp
+
+
+def map_fit(map_path: Path, stamps: np.ndarray) -> MapFit:
     """Where the experiment's map itself puts each played scan: registered onto ``map_path`` from its reference pose
     (tools/reference_check.py's map check), how far it moves from that pose. A localizer that matches every scan
     exactly where the map fits it has these errors against the reference; where the reference is bent (the sharp
     turns), so is the map built from it."""
     files = scan_files(KITTI / "scans")
     poses, _ = read_poses(KITTI / "poses_kitti.txt", "kitti")
-    shifts = np.array(
-        [reference_check.map_shift(map_path, files[k], poses[k])["map_shift_m"] for k in kitti_indices(stamps)]
-    )
-    return {
+    rows = [reference_check.map_shift(map_path, files[k], poses[k]) for k in kitti_indices(stamps)]
+    shifts = np.array([r["map_shift_m"] for r in rows])
+    fitted = np.array([r["map_pose"] for r in rows])
+    quat = Rotation.from_matrix(fitted[:, :3, :3]).as_quat()  # x y z w
+    figures = {
         "map_fit_translation_rmse_m": rounded(np.sqrt(np.mean(shifts**2))),
         "map_fit_translation_max_m": rounded(shifts.max()),
         f"map_fit_scans_over_{LOST_M:g}m": int((shifts > LOST_M).sum()),
     }
+    return MapFit(figures, make_trajectory(stamps, fitted[:, :3, 3], quat, "map fit"))
+
+
+def campus_map(scenario_map: Path, out: Path) -> Path:
+    """Writes ``out``: the map of a kitti00_far stretch inside the real campus map of CAMPUS (0.9 km^2, a loop road
+    around an empty inside), which is moved so that the centre of its largest empty disc lies at the centre of the
+    stretch's map. A start without a pose then searches a real map of the size it must handle, up to 1 km^2, where
+    the stretch is a sixth of the area and the rest is real structure of another place. Raises RuntimeError when the
+    two come closer than CAMPUS_CLEARANCE_M."""
+    stretch = xyz_array(read_pcd(scenario_map).points)
+    tiles = [xyz_array(read_pcd(f).points) for f in sorted(CAMPUS.glob("*.pcd"))]
+    campus = np.concatenate([t for t in tiles if len(t)])
+    low = campus[:, :2].min(axis=0)
+    cells = np.floor((campus[:, :2] - low) / CAMPUS_CELL_M).astype(int)
+    occupied = np.zeros(cells.max(axis=0) + 1, dtype=bool)
+    occupied[cells[:, 0], cells[:, 1]] = True
+    free = distance_transform_edt(~occupied)
+    inside = low + (np.array(np.unravel_index(np.argmax(free), free.shape)) + 0.5) * CAMPUS_CELL_M
+    shift = np.append(0.5 * (stretch[:, :2].min(axis=0) + stretch[:, :2].max(axis=0)) - inside, 0.0)
+    campus += shift
+    clearance = float(cKDTree(stretch[:, :2]).query(campus[:, :2])[0].min())
+    if clearance < CAMPUS_CLEARANCE_M:
+        raise RuntimeError(f"{scenario_map} reaches within {clearance:.1f} m of the campus map moved around it")
+    write_pcd(out, xyz_records(np.concatenate([stretch, campus]).astype(np.float32)))
+    return out
 
 
 def rounded(value: float | None, digits: int = 3) -> float | None:
@@ -159,7 +202,8 @@ def rounded(value: float | None, digits: int = 3) -> float | None:
 
 
 def figures(variant: str, scenario: Path, run: Path, modes: list[str], hog: str | None, fits: dict) -> list[dict]:
-    """One row per mode. ``fits`` keeps map_fit() per scenario (the variants that only start differently share it)."""
+    """One row per mode. ``fits`` keeps map_fit() per scenario (the variants that only start differently share it);
+    kitti00_far rows also give the localizer's error against the map fit (``to_map_fit_*``)."""
     summary = json.loads((run / "summary.json").read_text())
     inputs = read_scenario(scenario)
     reference = read_tum(inputs.ground_truth)
@@ -199,7 +243,14 @@ def figures(variant: str, scenario: Path, run: Path, modes: list[str], hog: str 
                 straight_scans_with_pose=good.published,
                 straight_translation_rmse_m=rounded(good.translation_rmse_m),
                 straight_translation_max_m=rounded(good.translation_max_m),
-                **fits[scenario],
+                **fits[scenario].figures,
+            )
+            # The localizer against the map fit instead of the reference: how far it is from where the map holds
+            # each scan (the reference's own bends left out).
+            to_fit = tracking(fits[scenario].poses, trajectory, stamps, summary["max_time_diff_s"])
+            row.update(
+                to_map_fit_translation_rmse_m=rounded(to_fit.translation_rmse_m),
+                to_map_fit_translation_max_m=rounded(to_fit.translation_max_m),
             )
         first = m.get("start") or {}
         for key in ("first_pose", "first_accepted_pose"):
@@ -226,6 +277,8 @@ def run_variants(variants: list[str], modes: list[str], out: Path, rate: str, ho
         shutil.rmtree(run, ignore_errors=True)  # its tiles were cut from a map that may have been replaced
         experiment = [*GPM, "experiment", str(scenario), "-o", str(run), "--ndt-threads", "1", "--rate", rate]
         experiment += ["--modes", *modes, "--empty-map-seconds", "0", *v.experiment]
+        if v.campus:
+            experiment += ["--map", str(campus_map(scenario / "global_map.pcd", out / f"{v.scenario}_campus_map.pcd"))]
         log = out / f"{variant}_experiment.log"
         with open(log, "w") as f:
             done = subprocess.run(experiment, stdout=f, stderr=subprocess.STDOUT)
@@ -260,6 +313,13 @@ def main() -> int:
         print(
             f"experiment-real: the kitti00_far keyframes are not at {KITTI} (no scans/ there); this experiment needs "
             "the team's real data (../shared/data/real beside the clone, or GPL_SHARED_DATA)",
+            file=sys.stderr,
+        )
+        return 2
+    if any(VARIANTS[v].campus for v in variants) and not CAMPUS.is_dir():
+        print(
+            f"experiment-real: the campus map tiles are not at {CAMPUS} (the team's real data, nova_utd_tiles); "
+            "the *_none_campus variants need them",
             file=sys.stderr,
         )
         return 2

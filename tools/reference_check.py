@@ -126,14 +126,17 @@ def check(scans_dir: Path, poses_path: Path, first: int, last: int) -> tuple[lis
 
 
 def map_shift(map_path: Path, scan: Path, pose: np.ndarray) -> dict:
-    """How far the registration of ``scan`` onto ``map_path`` from its reference ``pose`` moves it."""
+    """How far the registration of ``scan`` onto ``map_path`` from its reference ``pose`` moves it, and where it puts
+    it (``map_pose``, the 4x4 map_T_scan as nested lists)."""
     r = register(map_path, scan, pose)
-    difference = np.linalg.inv(pose) @ np.asarray(r["transform"])
+    fitted = np.asarray(r["transform"])
+    difference = np.linalg.inv(pose) @ fitted
     return {
         "status": r["status"],
         "nvtl": round(r["nvtl"], 3),
         "map_shift_m": round(float(np.linalg.norm(difference[:3, 3])), 3),
         "map_turn_deg": round(float(np.degrees(Rotation.from_matrix(difference[:3, :3]).magnitude())), 3),
+        "map_pose": fitted.tolist(),
     }
 
 

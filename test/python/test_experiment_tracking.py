@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 import reference_check
 
+from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array, xyz_records
+
 
 def test_straight_parts_leave_out_each_turn_and_its_margin():
     keyframes = np.arange(770, 801)
@@ -30,11 +32,11 @@ def test_straight_parts_of_the_whole_data_set():
     assert not kept[keyframes == 1234].any() and kept[keyframes == 1235].all()
 
 
-def test_each_stretch_runs_five_variants_on_two_imports():
+def test_each_stretch_runs_six_variants_on_two_imports():
     for name, (first, last, gap_at) in et.STRETCHES.items():
         stem = f"kitti_{name}"
         variants = {v: et.VARIANTS[v] for v in et.SETS["real"] if v.startswith(stem + "_") or v == stem}
-        assert len(variants) == 5
+        assert len(variants) == 6
         assert {v.scenario for v in variants.values()} == {stem, f"{stem}_drop20_gap8"}
         base = et.VARIANTS[stem].command
         assert (
@@ -57,7 +59,42 @@ def test_each_stretch_runs_five_variants_on_two_imports():
         assert et.VARIANTS[f"{stem}_offset20_90"].experiment[2:] == ("--start-offset", "20", "90")
         assert et.VARIANTS[f"{stem}_hint20"].experiment[2:] == ("--start", "hint", "--hint-sigma", "20")
         assert et.VARIANTS[f"{stem}_none"].experiment[2:] == ("--start", "none")
+        campus = et.VARIANTS[f"{stem}_none_campus"]
+        assert campus.campus and campus.experiment == et.VARIANTS[f"{stem}_none"].experiment
+        assert [v for v, k in variants.items() if k.campus] == [f"{stem}_none_campus"]
     assert not any(v.startswith("mulran") for v in et.VARIANTS)
+
+
+def _write_xyz(path, xyz):
+    write_pcd(path, xyz_records(np.asarray(xyz, dtype=np.float32)))
+
+
+def test_the_campus_map_surrounds_the_stretch_with_its_empty_inside(tmp_path, monkeypatch):
+    """A campus of two 25 m tiles: a ring road of radius 200 m about (1000, -500) (its largest empty disc is centred
+    there) and an empty tile; a stretch map of two blobs whose bounding box is centred at (30, 40). The campus moves by
+    (30, 40) - (1000, -500), the stretch stays, every point is kept."""
+    angles = np.linspace(0.0, 2.0 * np.pi, 2000, endpoint=False)
+    ring = np.stack([1000.0 + 200.0 * np.cos(angles), -500.0 + 200.0 * np.sin(angles), np.zeros_like(angles)], axis=1)
+    tiles = tmp_path / "tiles"
+    tiles.mkdir()
+    _write_xyz(tiles / "0_0.pcd", ring)
+    _write_xyz(tiles / "0_1.pcd", np.empty((0, 3)))
+    stretch = np.array([[0.0, 0.0, 1.0], [60.0, 80.0, 2.0], [10.0, 20.0, 3.0]])
+    _write_xyz(tmp_path / "stretch.pcd", stretch)
+    monkeypatch.setattr(et, "CAMPUS", tiles)
+    out = et.campus_map(tmp_path / "stretch.pcd", tmp_path / "campus.pcd")
+    merged = xyz_array(read_pcd(out).points)
+    assert len(merged) == len(stretch) + len(ring)
+    np.testing.assert_allclose(merged[: len(stretch)], stretch, atol=1e-5)
+    shift = np.array([30.0 - 1000.0, 40.0 + 500.0, 0.0])
+    # The empty disc's centre is found on CAMPUS_CELL_M cells: within a cell of the ring's centre.
+    np.testing.assert_allclose(merged[len(stretch) :], ring + shift, atol=et.CAMPUS_CELL_M)
+    moved = merged[len(stretch) :, :2] - [30.0, 40.0]
+    np.testing.assert_allclose(np.linalg.norm(moved, axis=1), 200.0, atol=et.CAMPUS_CELL_M)
+    # A stretch that reaches the ring is refused, naming its map.
+    _write_xyz(tmp_path / "wide.pcd", [[0.0, 0.0, 0.0], [0.0, 380.0, 0.0]])
+    with pytest.raises(RuntimeError, match=r"wide\.pcd reaches within"):
+        et.campus_map(tmp_path / "wide.pcd", tmp_path / "wide_campus.pcd")
 
 
 @pytest.mark.skipif(
@@ -82,6 +119,10 @@ def test_the_map_fit_is_how_far_the_map_moves_each_played_scan_from_its_referenc
     (data / "times.txt").write_text("0.0\n0.1\n")
     monkeypatch.setattr(et, "KITTI", data)
     fit = et.map_fit(data / "scans" / "000000.pcd", np.array([0.1]))
-    assert fit["map_fit_translation_rmse_m"] == pytest.approx(off_m, abs=0.05)
-    assert fit["map_fit_translation_max_m"] == fit["map_fit_translation_rmse_m"]
-    assert fit["map_fit_scans_over_1m"] == (1 if off_m > 1.0 else 0)
+    assert fit.figures["map_fit_translation_rmse_m"] == pytest.approx(off_m, abs=0.05)
+    assert fit.figures["map_fit_translation_max_m"] == fit.figures["map_fit_translation_rmse_m"]
+    assert fit.figures["map_fit_scans_over_1m"] == (1 if off_m > 1.0 else 0)
+    # Where the map puts the scan: the pair's own motion (the independent registrations), whatever the reference says.
+    truth = np.loadtxt(real_data / "hdl32_pair" / "T_target_source_small_gicp.txt")
+    assert fit.poses.t.tolist() == [0.1]
+    np.testing.assert_allclose(fit.poses.xyz[0], truth[:3, 3], atol=0.05)
