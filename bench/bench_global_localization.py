@@ -11,12 +11,17 @@ Data sets:
   disagrees with the map, and tools/reference_check.py where it disagrees with the motion between the scans; the
   success rate is also given over the trials whose scan's reference agrees with both neighbours). The map is built
   from the even-numbered scans, the odd-numbered ones are localized;
+- kitti_campus: real Velodyne HDL-64E keyframes of kitti00_far's first stretch with their OXTS GNSS/INS poses, the
+  map from every 3rd scan (`gpm import`, as `make experiment-real`) set inside the real 0.9 km^2 Nova campus map
+  (tools/experiment_tracking.py campus_map()), the other scans localized: the map a start without a pose searches;
 - quick (--quick): a tiny synthetic street (fixtures.synthetic_scene), a few seconds in all.
 Each trial rotates the scan by a random yaw and centres the search up to --offset m away from the truth in a
 random direction. Success: accepted and within 0.3 m and 1 deg of the truth. Modes: the default search
 (adapted initial score S0) on a --size square, the plain BBS (no S0) on the same, and the default search on a
---large-size square, all over the full circle of yaw; and "reference", the refinement started at the true pose,
-whose error says how well the reference pose fits the map at all (a bound on what any search can reach).
+--large-size square, all over the full circle of yaw; "whole", the default search over the square that holds the
+whole map (its centre and longer side: the localizer's start without a pose); and "reference", the refinement
+started at the true pose, whose error says how well the reference pose fits the map at all (a bound on what any
+search can reach).
 Times: wall seconds of each search and its CPU seconds (all threads), which a busy machine inflates less.
 """
 
@@ -40,6 +45,7 @@ from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array, xyz_rec
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
+from experiment_tracking import CAMPUS, GPM, KITTI, STRETCHES, campus_map  # noqa: E402
 from reference_check import cached_check  # noqa: E402
 from shared_data import SHARED_REAL_DATA  # noqa: E402
 
@@ -96,15 +102,31 @@ def errors(answer: dict, truth: np.ndarray) -> tuple[float, float]:
     return float(np.linalg.norm(delta[:3, 3])), angle
 
 
+def whole_square(map_pcd: Path) -> tuple[tuple[float, float], float]:
+    """The centre and side [m] of the square that holds the map's x y extent."""
+    xy = xyz_array(read_pcd(map_pcd).points)[:, :2]
+    low, high = xy.min(axis=0), xy.max(axis=0)
+    return (float(0.5 * (low[0] + high[0])), float(0.5 * (low[1] + high[1]))), float((high - low).max())
+
+
 def search(
-    program: Path, map_pcd: Path, trials: list[Trial], size: float, threads: int, plain: bool, overrides: list[str]
+    program: Path,
+    map_pcd: Path,
+    trials: list[Trial],
+    size: float,
+    threads: int,
+    plain: bool,
+    overrides: list[str],
+    centre: tuple[float, float] | None = None,
 ) -> list[dict]:
-    """Each trial searched over the full circle of yaw in a square of ``size`` [m] around its centre; ``size`` 0:
-    the reference check, a 1 m square and +-0.05 rad around the true pose (the refinement from the truth)."""
+    """Each trial searched over the full circle of yaw in a square of ``size`` [m] around its centre (or around
+    ``centre`` for all); ``size`` 0: the reference check, a 1 m square and +-0.05 rad around the true pose (the
+    refinement from the truth)."""
     with tempfile.NamedTemporaryFile("w", suffix=".txt") as requests:
         for t in trials:
             if size > 0:
-                requests.write(f"{t.scan} {t.center[0]!r} {t.center[1]!r} {size!r} 0 {2 * math.pi!r}\n")
+                x, y = centre or t.center
+                requests.write(f"{t.scan} {x!r} {y!r} {size!r} 0 {2 * math.pi!r}\n")
             else:
                 yaw = math.atan2(t.truth[1, 0], t.truth[0, 0])
                 requests.write(f"{t.scan} {t.truth[0, 3]!r} {t.truth[1, 3]!r} 1.0 {yaw!r} 0.1\n")
@@ -268,6 +290,24 @@ def mulran_dataset(directory: Path, trials: int, offset: float, rng) -> tuple[Pa
     return map_pcd, out
 
 
+def kitti_campus_dataset(directory: Path, trials: int, offset: float, rng) -> tuple[Path, list[Trial]]:
+    first, last, _ = STRETCHES["s1"]
+    stretch = directory / "kitti_s1"
+    scans = (str(KITTI / "scans"), str(KITTI / "poses_kitti.txt"), "--times", str(KITTI / "times.txt"))
+    command = ["import", *scans, "--first", str(first), "--last", str(last), "--map-every", "3", "--quiet"]
+    subprocess.run([*GPM, *command, "-o", str(stretch)], check=True, stdout=subprocess.DEVNULL)
+    map_pcd = campus_map(stretch / "global_map.pcd", directory / "kitti_campus_map.pcd")
+    poses = np.loadtxt(KITTI / "poses_kitti.txt").reshape(-1, 3, 4)
+    files = sorted((KITTI / "scans").glob("*.pcd"))
+    held = [k for k in range(first, last + 1) if (k - first) % 3 != 0]  # the scans the map was not built from
+    out = []
+    for n in range(trials):
+        k = held[(n * len(held)) // trials] if trials <= len(held) else held[n % len(held)]
+        points = xyz_array(read_pcd(files[k]).points)
+        out.append(make_trial(directory, f"kitti_{n}", points, np.vstack([poses[k], [0, 0, 0, 1]]), offset, rng))
+    return map_pcd, out
+
+
 # ---------------------------------------------------------------- main
 
 
@@ -280,7 +320,9 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="a tiny synthetic street only (a few seconds)")
     parser.add_argument("--trials", type=int, default=100, help="trials per data set (default 100)")
-    parser.add_argument("--datasets", default="sim_courtyard,sim_urban,mulran_riverside02", help="comma-separated")
+    parser.add_argument(
+        "--datasets", default="sim_courtyard,sim_urban,mulran_riverside02,kitti_campus", help="comma-separated"
+    )
     parser.add_argument("--scale", type=float, default=0.25, help="simulated world scale (default 0.25)")
     parser.add_argument("--keyframe-spacing", type=float, default=2.0, help="simulated map: a sweep every ... [m]")
     parser.add_argument("--size", type=float, default=40.0, help="search square [m] (default 40)")
@@ -289,9 +331,9 @@ def main() -> int:
     parser.add_argument("--threads", type=int, default=2, help="OpenMP threads (default 2)")
     parser.add_argument(
         "--modes",
-        default="reference,s0,plain,large",
+        default="reference,s0,plain,large,whole",
         help="comma-separated: reference (refinement from the true pose: how well the reference fits the map), s0,"
-        " plain, large (default: all)",
+        " plain, large, whole (default: all)",
     )
     parser.add_argument("--set", action="append", default=[], metavar="NAME=V", help="search parameter override")
     parser.add_argument("--per-trial", action="store_true", help="also print one JSON line per trial")
@@ -306,6 +348,7 @@ def main() -> int:
         "s0": (args.size, False),
         "plain": (args.size, True),
         "large": (args.large_size, False),
+        "whole": (None, False),
         "reference": (0.0, False),
     }
     chosen = ["s0"] if args.quick else args.modes.split(",")
@@ -324,13 +367,21 @@ def main() -> int:
                     print(json.dumps({"dataset": dataset, "skipped": f"{MULRAN} is absent (set GPL_SHARED_DATA)"}))
                     continue
                 map_pcd, data = mulran_dataset(directory, trials, args.offset, rng)
+            elif dataset == "kitti_campus":
+                if not (KITTI / "scans").is_dir() or not CAMPUS.is_dir():
+                    print(json.dumps({"dataset": dataset, "skipped": f"{KITTI} or {CAMPUS} is absent"}))
+                    continue
+                map_pcd, data = kitti_campus_dataset(directory, trials, args.offset, rng)
             else:
                 print(f"unknown data set {dataset!r}", file=sys.stderr)
                 return 2
             reference_ok = None
             for mode in chosen:
                 size, plain = modes[mode]
-                answers = search(program, map_pcd, data, size, args.threads, plain, args.set)
+                centre = None
+                if mode == "whole":
+                    centre, size = whole_square(map_pcd)
+                answers = search(program, map_pcd, data, size, args.threads, plain, args.set, centre)
                 rows = scored(answers, data)
                 if args.per_trial:
                     for r in rows:
