@@ -217,8 +217,9 @@ class Localizer {
   /// globalLocalize does, but takes an answer only when the answer of an earlier scan's search agrees with it: the
   /// two are no farther apart than the motion bound between their scans (prediction/max_speed and max_yaw_rate,
   /// boundedSearchRegion) plus the search's own distance between distinct places (runner_up_distance and
-  /// runner_up_yaw); the motion between the two is then the track's velocity. An answer that no earlier one agrees
-  /// with is held for the next search and reported not found, with the reason, and `held`. One search alone is never
+  /// runner_up_yaw); the motion between the two is then the track's velocity. An answer that no held one agrees
+  /// with is held for the next searches (the last four) and reported not found, with the reason, and `held`. One
+  /// search alone is never
   /// taken: on a large map the search can miss the true place, and another place may then fit the scan well enough
   /// to pass every gate. Searches on every core (nothing is tracked meanwhile). Scan thread only.
   struct StartSearch {
@@ -227,7 +228,7 @@ class Localizer {
   };
   StartSearch searchForStart(const SearchRegion& region);
   /// An automatic start's answer is held, waiting for a search of a later scan to agree with it.
-  bool startAwaitsConfirmation() const { return start_candidate_.has_value(); }
+  bool startAwaitsConfirmation() const { return !start_candidates_.empty(); }
   /// The x y z extent of the current target's Gaussians (voxel means); empty without a map.
   std::optional<Eigen::AlignedBox3d> mapBounds() const;
   /// Whether the map held reaches around the square of half side `half` [m] about `centre` (x y, map frame):
@@ -316,7 +317,7 @@ class Localizer {
     Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();  // an automatic start's answer (searchForStart) ...
     double stamp = 0.0;                                      // ... for the scan of this stamp
   };
-  std::optional<StartCandidate> start_candidate_;  // held until the search of a later scan agrees with it
+  std::vector<StartCandidate> start_candidates_;  // held until the search of a later scan agrees with one, oldest first
   // A recovery search running on its own thread (lost.background_search). Declared last: its destructor waits for
   // the thread, which uses global_ and global_target_.
   struct BackgroundSearch {

@@ -56,6 +56,10 @@ constexpr bool kFromCoarseMap = true;
 // holds converges in two to four (the coarse stage takes it the metres).
 constexpr int kCarriedMatchIterations = 6;
 
+// An automatic start holds the answers of this many searches that no later one agreed with yet (the oldest goes):
+// on a loaded machine a search takes over a second, and a right answer followed by a wrong one still finds its match.
+constexpr std::size_t kHeldStartAnswers = 4;
+
 NdtConfig carriedMatchConfig(const NdtConfig& config) {
   NdtConfig c = config;
   c.max_iterations = std::min(config.max_iterations, kCarriedMatchIterations);
@@ -128,7 +132,7 @@ void Localizer::reset() {
   source_stamp_.reset();
   motion_seen_ = MotionBounds();
   start_refused_ = false;
-  start_candidate_.reset();
+  start_candidates_.clear();
   ++track_version_;
 }
 
@@ -287,26 +291,29 @@ Localizer::StartSearch Localizer::searchForStart(const SearchRegion& region) {
   GlobalLocalizationResult r = searchLastScan(searchRequest(region, 0));
   if (!r.found) return {r, false};
   const StartCandidate answer{r.map_T_base, *source_stamp_};
-  const std::optional<StartCandidate> earlier = std::exchange(start_candidate_, answer);
-  if (earlier) {
+  // The latest held answer that this one agrees with (a search between them may have answered elsewhere).
+  for (auto earlier = start_candidates_.rbegin(); earlier != start_candidates_.rend(); ++earlier) {
     const SearchRegion reach =
         boundedSearchRegion(earlier->pose, answer.stamp - earlier->stamp, MotionBounds(), false, config_.prediction);
     const double apart = (answer.pose.translation() - earlier->pose.translation()).head<2>().norm();
     const double turn = Eigen::AngleAxisd(earlier->pose.rotation().transpose() * answer.pose.rotation()).angle();
-    if (apart <= reach.radius + config_.global.runner_up_distance &&
-        turn <= reach.yaw_range + config_.global.runner_up_yaw) {
-      // The two answers also measure the motion between their scans: the next scan is predicted from it, as in
-      // tracking, instead of being searched for around a pose without a velocity.
-      startFrom(earlier->pose, earlier->stamp, matchCovariance(r.refinement, config_.covariance), r.refinement.nvtl);
-      predictor_.update(answer.pose, answer.stamp, config_.preprocess.deskew_twist_smoothing);
-      noteAccepted(r.refinement);
-      fusion_.reset();
-      return {r, false};
-    }
+    if (apart > reach.radius + config_.global.runner_up_distance ||
+        turn > reach.yaw_range + config_.global.runner_up_yaw)
+      continue;
+    // The two answers also measure the motion between their scans: the next scan is predicted from it, as in
+    // tracking, instead of being searched for around a pose without a velocity.
+    startFrom(earlier->pose, earlier->stamp, matchCovariance(r.refinement, config_.covariance), r.refinement.nvtl);
+    predictor_.update(answer.pose, answer.stamp, config_.preprocess.deskew_twist_smoothing);
+    noteAccepted(r.refinement);
+    fusion_.reset();
+    return {r, false};
   }
   r.found = false;
-  r.reason = earlier ? "another place than the last search's answer: held until the search of a later scan agrees"
-                     : "held until the search of a later scan agrees (one search's answer alone is not taken)";
+  r.reason = start_candidates_.empty()
+                 ? "held until the search of a later scan agrees (one search's answer alone is not taken)"
+                 : "another place than the held answers: held until the search of a later scan agrees";
+  if (start_candidates_.size() == kHeldStartAnswers) start_candidates_.erase(start_candidates_.begin());
+  start_candidates_.push_back(answer);
   return {r, true};
 }
 
@@ -320,7 +327,7 @@ void Localizer::startFrom(const Eigen::Isometry3d& pose, double stamp, const Mat
   reference_nvtl_ = reference_nvtl;
   last_global_search_.reset();
   start_refused_ = false;
-  start_candidate_.reset();
+  start_candidates_.clear();
   ++track_version_;
 }
 

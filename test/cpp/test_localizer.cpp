@@ -858,6 +858,39 @@ TEST(Localizer, AnAutomaticStartIsNotTakenWhenTheSearchOfALaterScanDisagrees) {
   EXPECT_FALSE(loc.startAwaitsConfirmation());
 }
 
+// The answers of the last four searches are held: a right answer followed by one elsewhere (on a loaded machine
+// searches are seconds apart) is still matched by a later right one. The oldest held answer goes first.
+TEST(Localizer, AnAutomaticStartAgreesWithAnyOfTheLastFourHeldAnswers) {
+  const gpl::PointCloud world = t::makeWorld();
+  gpl::Localizer loc(testConfig());
+  loadMap(loc, world);
+  const Eigen::Isometry3d truth = standingPose(), elsewhere = t::poseXYYaw(-6.0, 4.0, -1.2);
+  double time = 0.0;
+  auto answerFrom = [&](const Eigen::Isometry3d& pose) {
+    loc.processScan(time, t::scanFrom(world, pose * mount(), 30.0f, 0.01f, 930 + static_cast<unsigned>(10 * time)),
+                    mount());
+    time += 0.1;
+    return loc.searchForStart(wholeMap(loc));
+  };
+  ASSERT_TRUE(answerFrom(truth).held);
+  ASSERT_TRUE(answerFrom(elsewhere).held);  // 13 m off: the motion bound after 0.1 s is 4.5 m
+  const gpl::Localizer::StartSearch taken = answerFrom(truth);
+  ASSERT_TRUE(taken.search.found) << taken.search.reason;
+  EXPECT_LT(t::translationError(*loc.lastAcceptedPose(), truth), 0.05);
+
+  // Four answers elsewhere after the one at the truth push it out: the next one there starts anew.
+  loc.reset();
+  time += 10.0;
+  ASSERT_TRUE(answerFrom(truth).held);
+  const auto turned = [](const Eigen::Isometry3d& pose, double yaw) { return pose * t::poseXYYaw(0.0, 0.0, yaw); };
+  for (const Eigen::Isometry3d& pose : {elsewhere, turned(truth, M_PI), turned(elsewhere, M_PI), turned(truth, 1.6)})
+    ASSERT_TRUE(answerFrom(pose).held);  // no two of them agree
+  // The held ones are those four now; the next answer at the truth agrees with none of them.
+  const gpl::Localizer::StartSearch alone = answerFrom(truth);
+  EXPECT_TRUE(alone.held);
+  EXPECT_LT(t::translationError(alone.search.map_T_base, truth), 0.05);
+}
+
 TEST(Localizer, SearchStructuresAreReleasedWithTheMapTheyWereBuiltFrom) {
   // In tiles mode the target changes as the window moves: structures built for an old window are never used again
   // and would keep that window's voxels alive. A static map keeps them (a later search reuses them).
