@@ -45,7 +45,7 @@ from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array, xyz_rec
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tools"))
-from experiment_tracking import CAMPUS, GPM, KITTI, STRETCHES, campus_map  # noqa: E402
+from experiment_tracking import CAMPUS, KITTI, STRETCHES, VARIANTS, campus_map, write_scenario  # noqa: E402
 from reference_check import cached_check  # noqa: E402
 from shared_data import SHARED_REAL_DATA  # noqa: E402
 
@@ -292,10 +292,9 @@ def mulran_dataset(directory: Path, trials: int, offset: float, rng) -> tuple[Pa
 
 def kitti_campus_dataset(directory: Path, trials: int, offset: float, rng) -> tuple[Path, list[Trial]]:
     first, last, _ = STRETCHES["s1"]
-    stretch = directory / "kitti_s1"
-    scans = (str(KITTI / "scans"), str(KITTI / "poses_kitti.txt"), "--times", str(KITTI / "times.txt"))
-    command = ["import", *scans, "--first", str(first), "--last", str(last), "--map-every", "3", "--quiet"]
-    subprocess.run([*GPM, *command, "-o", str(stretch)], check=True, stdout=subprocess.DEVNULL)
+    variant = VARIANTS["kitti_s1_none_campus"]
+    stretch = directory / variant.scenario
+    write_scenario(variant, stretch, stdout=subprocess.DEVNULL)  # stdout holds only the JSON lines
     map_pcd = campus_map(stretch / "global_map.pcd", directory / "kitti_campus_map.pcd")
     poses = np.loadtxt(KITTI / "poses_kitti.txt").reshape(-1, 3, 4)
     files = sorted((KITTI / "scans").glob("*.pcd"))

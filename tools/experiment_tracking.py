@@ -5,7 +5,7 @@ Real (``make experiment-real``): the KITTI odometry 00 keyframes of ../shared/da
 $GPL_SHARED_DATA): real Velodyne HDL-64E scans of a car, about 2 m apart, with OXTS RTK GNSS/INS poses
 (decimetre-level: a reference, not SLAM output). Its two stretches (stretches.txt: lines 0-251 and 252-560 of the
 pose and time files) are each imported with `gpm import` (the map from every 3rd scan, the others played), and
-run in five variants per stretch ``s1`` and ``s2``:
+run in six variants per stretch ``s1`` and ``s2``:
 - ``kitti_s1``: as recorded, started at the first reference pose;
 - ``kitti_s1_drop20_gap8``: 20 % of the played scans dropped at random and 8 s cut in the middle of the drive;
 - ``kitti_s1_offset20_90``: started 20 m off in a seeded random direction and turned by 90 deg;
@@ -265,6 +265,11 @@ def figures(variant: str, scenario: Path, run: Path, modes: list[str], hog: str 
     return rows
 
 
+def write_scenario(v: Variant, scenario: Path, stdout=None) -> None:
+    """Writes the scenario directory of ``v`` (its gpm command) at ``scenario``; ``stdout`` as subprocess.run's."""
+    subprocess.run([*GPM, *v.command, "-o", str(scenario), "--force", "--quiet"], check=True, stdout=stdout)
+
+
 def run_variants(variants: list[str], modes: list[str], out: Path, rate: str, hog: str | None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     results, written, failed, fits = [], set(), 0, {}
@@ -272,7 +277,7 @@ def run_variants(variants: list[str], modes: list[str], out: Path, rate: str, ho
         v = VARIANTS[variant]
         scenario, run = out / v.scenario, out / f"{variant}_run"
         if v.scenario not in written:
-            subprocess.run([*GPM, *v.command, "-o", str(scenario), "--force", "--quiet"], check=True)
+            write_scenario(v, scenario)
             written.add(v.scenario)
         shutil.rmtree(run, ignore_errors=True)  # its tiles were cut from a map that may have been replaced
         experiment = [*GPM, "experiment", str(scenario), "-o", str(run), "--ndt-threads", "1", "--rate", rate]

@@ -219,9 +219,8 @@ class Localizer {
   /// boundedSearchRegion) plus the search's own distance between distinct places (runner_up_distance and
   /// runner_up_yaw); the motion between the two is then the track's velocity. An answer that no held one agrees
   /// with is held for the next searches (the last four) and reported not found, with the reason, and `held`. One
-  /// search alone is never
-  /// taken: on a large map the search can miss the true place, and another place may then fit the scan well enough
-  /// to pass every gate. Searches on every core (nothing is tracked meanwhile). Scan thread only.
+  /// search alone is never taken: on a large map the search can miss the true place, and another place may then fit
+  /// the scan well enough to pass every gate. Searches on every core (nothing is tracked meanwhile). Scan thread only.
   struct StartSearch {
     GlobalLocalizationResult search;  ///< found: the start was taken
     bool held = false;                ///< the search answered and its answer is held for the next one to confirm
