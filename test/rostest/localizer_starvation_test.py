@@ -8,8 +8,9 @@ costs the localizer so little that busy processes of equal weight leave it enoug
 leaves depends on the machine: on a fast one the localizer keeps up. So the load starts with the localizer's
 process stopped (SIGSTOP) for STARVED seconds, the limit of starvation on any machine: the scans of that time
 arrive at once when it continues. The localizer must then skip scans rather than queue them: the drops are
-counted in ~status (scans_dropped), and the scans it does match are recent ones (bounded lag). When the load goes (busy processes killed, niceness 0 again) it must
-catch up: lag back to normal and every pose within 5 cm of the ground truth."""
+counted in ~status (scans_dropped), and the scans it does match are recent ones (bounded lag). When the load
+goes (busy processes killed, niceness 0 again) it must catch up: lag back to normal and every pose within 5 cm
+of the ground truth."""
 
 from __future__ import annotations
 
