@@ -19,12 +19,12 @@ import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
 
-import lzf
 import numpy as np
 
 from grid_puzzle_localization.errors import PcdError
 from grid_puzzle_localization.pcd.ascii_codec import decode_ascii_lines
 from grid_puzzle_localization.pcd.header import PcdHeader, read_pcd_header
+from grid_puzzle_localization.util.pip_only import import_pip_only
 
 XYZ = ("x", "y", "z")
 XYZ_DTYPE = np.dtype([(name, "<f4") for name in XYZ])  # x, y, z as float32: 12 bytes a point
@@ -160,6 +160,7 @@ def read_compressed(path: str | os.PathLike, h: PcdHeader) -> np.ndarray:
         payload = f.read(compressed_size)
     if len(payload) < compressed_size:
         raise PcdError(f"{path}: truncated: {compressed_size} compressed bytes declared, {len(payload)} present")
+    lzf = import_pip_only("lzf", "python-lzf", f"{path}: a binary_compressed PCD")
     raw = None
     with contextlib.suppress(ValueError):  # python-lzf's "error in compressed data"
         raw = lzf.decompress(payload, raw_size)

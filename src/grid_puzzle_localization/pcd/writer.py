@@ -12,13 +12,13 @@ import struct
 from pathlib import Path
 from typing import BinaryIO
 
-import lzf
 import numpy as np
 
 from grid_puzzle_localization.errors import PcdError
 from grid_puzzle_localization.pcd.ascii_codec import encode_ascii
 from grid_puzzle_localization.pcd.header import IDENTITY_VIEWPOINT, PcdHeader, header_for
 from grid_puzzle_localization.util.atomic import atomic_write
+from grid_puzzle_localization.util.pip_only import import_pip_only
 
 _ASCII_BATCH = 200_000
 _MAX_POINTS = 10**18  # reserves header room for a point count of up to 19 digits
@@ -63,6 +63,7 @@ def _compressed(records: np.ndarray) -> bytes:
     if not raw:
         return struct.pack("<II", 0, 0)
     # LZF's worst case grows incompressible data by about 1/32; give it that room so it never refuses.
+    lzf = import_pip_only("lzf", "python-lzf", "writing a binary_compressed PCD")
     data = lzf.compress(raw, len(raw) + len(raw) // 16 + 64)
     return struct.pack("<II", len(data), len(raw)) + data
 

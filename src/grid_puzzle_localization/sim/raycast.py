@@ -9,11 +9,10 @@ from __future__ import annotations
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from embreex import rtcore_scene
-from embreex.mesh_construction import TriangleMesh
 
 from grid_puzzle_localization.sim.meshes import Mesh
 from grid_puzzle_localization.util.iteration import pairwise
+from grid_puzzle_localization.util.pip_only import import_pip_only
 
 _MIN_RAYS_PER_THREAD = 20000
 
@@ -22,10 +21,12 @@ class RayCaster:
     """Casts rays against ``mesh``; ``threads`` worker threads share each batch."""
 
     def __init__(self, mesh: Mesh, threads: int = 2) -> None:
-        self._scene = rtcore_scene.EmbreeScene()
+        needed_for = "Ray casting (`gpm simulate`)"
+        self._scene = import_pip_only("embreex.rtcore_scene", "embreex", needed_for).EmbreeScene()
+        meshes = import_pip_only("embreex.mesh_construction", "embreex", needed_for)
         # embreex keeps a reference to the triangle buffer it was given.
         self._triangles = np.ascontiguousarray(mesh.triangles, dtype=np.float32)
-        TriangleMesh(self._scene, self._triangles)
+        meshes.TriangleMesh(self._scene, self._triangles)
         self.threads = max(1, int(threads))
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
 
