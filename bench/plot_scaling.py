@@ -7,10 +7,7 @@ import argparse
 import json
 from pathlib import Path
 
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
-
-from grid_puzzle_localization.util.atomic import atomic_write
+from grid_puzzle_localization.report.plots import new_figure, save_png
 from grid_puzzle_localization.util.iteration import zip_equal
 
 STYLE = {"global": ("tab:blue", "global map (pcd)"), "tiles": ("tab:orange", "grid puzzle (tiles by reference)")}
@@ -23,7 +20,7 @@ def main() -> int:
     args = parser.parse_args()
     runs = [json.loads(line) for line in args.results.read_text().splitlines() if line.strip()]
     runs = [r for r in runs if r.get("bench") == "scaling"]
-    fig = Figure(figsize=(9, 3.4), layout="constrained")
+    fig = new_figure(9, 3.4)
     axes = fig.subplots(1, 2)
     panels = (("peak_rss_mb", "peak RSS"), ("map_memory_mb", "map memory"))
     for ax, (key, title) in zip_equal(axes, panels):
@@ -35,9 +32,7 @@ def main() -> int:
         ax.set_title(f"localizer {title}")
         ax.grid(alpha=0.3)
         ax.legend(loc="upper left")
-    FigureCanvasAgg(fig)
-    with atomic_write(args.out, "wb") as f:
-        fig.savefig(f, format="png", dpi=110)
+    save_png(fig, args.out)
     return 0
 
 

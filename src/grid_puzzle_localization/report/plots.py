@@ -21,7 +21,14 @@ COLORS = {"global": "tab:blue", "grid_puzzle": "tab:orange", "grid_puzzle_rospy"
 MAP_COLOR = "0.82"  # light grey: the map stays under the trajectories
 
 
-def _save(fig: Figure, path: str | os.PathLike) -> None:
+def new_figure(width: float, height: float) -> Figure:
+    """A figure of ``width`` x ``height`` inches with constrained layout (the keyword matplotlib has had since 3.1,
+    Ubuntu 20.04's; ``layout=`` came with 3.5)."""
+    return Figure(figsize=(width, height), constrained_layout=True)
+
+
+def save_png(fig: Figure, path: str | os.PathLike) -> None:
+    """Renders ``fig`` on the Agg canvas and writes it to ``path`` atomically."""
     FigureCanvasAgg(fig)
     with atomic_write(path, "wb") as f:
         fig.savefig(f, format="png", dpi=110)
@@ -38,7 +45,7 @@ def plot_resource(
     """One panel per protocol: ``metric`` summed over the protocol's processes, per mode, over time.
     ``processes[mode][protocol]`` lists the process names."""
     protocols = list(next(iter(processes.values())))
-    fig = Figure(figsize=(9, 3.2 * len(protocols)), layout="constrained")
+    fig = new_figure(9, 3.2 * len(protocols))
     axes = fig.subplots(len(protocols), 1, squeeze=False)[:, 0]
     for ax, protocol in zip_equal(axes, protocols):
         for mode, log in logs.items():
@@ -49,7 +56,7 @@ def plot_resource(
         ax.set_ylabel(ylabel)
         ax.grid(alpha=0.3)
         ax.legend(loc="best")
-    _save(fig, path)
+    save_png(fig, path)
 
 
 def plot_cpu(path, logs, processes) -> None:
@@ -65,7 +72,7 @@ def trajectory_figure(
 ) -> Figure:
     """Top-down (x, y) view of every mode's trajectory over the ground truth, over the map's points
     (``map_xy``, (N, 2) [m], e.g. report.map_view.map_top_view) when given."""
-    fig = Figure(figsize=(7, 7), layout="constrained")
+    fig = new_figure(7, 7)
     ax = fig.subplots()
     if map_xy is not None and len(map_xy):
         ax.scatter(map_xy[:, 0], map_xy[:, 1], s=0.3, c=MAP_COLOR, linewidths=0, rasterized=True, label="map")
@@ -87,7 +94,7 @@ def plot_trajectories(
     ground_truth: Trajectory | None,
     map_xy: np.ndarray | None = None,
 ) -> None:
-    _save(trajectory_figure(trajectories, ground_truth, map_xy), path)
+    save_png(trajectory_figure(trajectories, ground_truth, map_xy), path)
 
 
 def plot_errors(
@@ -102,7 +109,7 @@ def plot_errors(
     panels = (["ground truth"] if ground_truth is not None else []) + (
         [baseline] if baseline in trajectories and len(trajectories) > 1 else []
     )
-    fig = Figure(figsize=(9, 3.2 * max(1, len(panels))), layout="constrained")
+    fig = new_figure(9, 3.2 * max(1, len(panels)))
     axes = fig.subplots(max(1, len(panels)), 1, squeeze=False)[:, 0]
     t0 = min(float(tr.t[0]) for tr in trajectories.values() if len(tr))
     for ax, panel in zip(axes, panels):
@@ -118,4 +125,4 @@ def plot_errors(
         ax.set_ylim(bottom=0.0)
         ax.grid(alpha=0.3)
         ax.legend(loc="best")
-    _save(fig, path)
+    save_png(fig, path)
