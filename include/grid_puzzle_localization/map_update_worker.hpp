@@ -65,6 +65,25 @@ struct MapChange {
 /// Tile (i, j) of side `grid_size` named by the stem "cx_cy"; throws std::invalid_argument naming the stem.
 TileKey tileKeyOfStem(const std::string& stem, double grid_size);
 
+/// The tiles of a change still to load, handed out nearest first: each take() sorts what is left by the distance of
+/// its tile's centre from the newest focus (the predicted position), so a pose that moves on while a large change
+/// loads (a slow map store) still gets the tiles under its scans first. Without a focus, the change's own order (the
+/// provider's: nearest the pose it served). Ids that are not tile names go last; loading them reports why.
+class NearestFirstTiles {
+ public:
+  NearestFirstTiles(const std::vector<std::string>& ids, double grid_size);
+  /// The next `count` ids (fewer at the end), nearest `focus` [m, map frame] first; ties keep their order.
+  std::vector<std::string> take(std::size_t count, const std::optional<Eigen::Vector2d>& focus);
+  bool empty() const { return left_.empty(); }
+
+ private:
+  struct Tile {
+    std::string id;
+    Eigen::Vector2d centre;  // [m]; NaN when the id is not a tile name
+  };
+  std::vector<Tile> left_;
+};
+
 /// What the last finished update did.
 struct MapUpdateStats {
   std::uint64_t generation = 0;  ///< snapshots published so far
@@ -111,6 +130,10 @@ class MapUpdateWorker {
   ~MapUpdateWorker();
   MapUpdateWorker(const MapUpdateWorker&) = delete;
   MapUpdateWorker& operator=(const MapUpdateWorker&) = delete;
+
+  /// Where the vehicle is predicted to be [m, map frame]: tiles still to load go nearest it first (NearestFirstTiles).
+  /// Thread-safe, returns at once; the localizer sets it with every scan.
+  void setFocus(const Eigen::Vector2d& position);
 
   /// Queues `change`; returns at once. Thread-safe. Changes apply in submission order; everything queued
   /// while the worker is busy becomes one batch and one snapshot.
@@ -159,6 +182,7 @@ class MapUpdateWorker {
   MapStore& storeAt(const std::string& url, const std::string& revision);
   void readAhead();        // prefetch while nothing is queued
   void copyStoreStatus();  // the map store's status into stats_; mutex_ held
+  std::optional<Eigen::Vector2d> focus() const;
 
   mutable std::mutex mutex_;  // guards everything below up to worker_
   std::condition_variable wake_;
@@ -190,6 +214,7 @@ class MapUpdateWorker {
   std::unique_ptr<MapStore> store_;        // worker thread only: the tile directory given by URL, if any
   std::vector<std::string> refetch_;       // worker thread only: window tiles its fetch failed, tried again
   bool prefetching_ = false;               // guarded by mutex_
+  std::optional<Eigen::Vector2d> focus_;   // guarded by mutex_: the newest predicted position
   MapUpdateStats totals_;                  // worker thread only: the by-reference totals of stats_
   std::thread worker_;
 };

@@ -11,6 +11,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <limits>
 #include <stdexcept>
 #include <unordered_set>
 #if defined(__GLIBC__)
@@ -62,6 +63,36 @@ TileKey tileKeyOfStem(const std::string& stem, double grid_size) {
   return {static_cast<std::int64_t>(std::floor(cx / grid_size)), static_cast<std::int64_t>(std::floor(cy / grid_size))};
 }
 
+NearestFirstTiles::NearestFirstTiles(const std::vector<std::string>& ids, double grid_size) {
+  left_.reserve(ids.size());
+  for (const std::string& id : ids) {
+    Eigen::Vector2d centre = Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
+    try {
+      const TileKey key = tileKeyOfStem(id, grid_size);
+      centre = {(static_cast<double>(key.i) + 0.5) * grid_size, (static_cast<double>(key.j) + 0.5) * grid_size};
+    } catch (const std::invalid_argument&) {
+      // Reported when the tile is loaded.
+    }
+    left_.push_back({id, centre});
+  }
+}
+
+std::vector<std::string> NearestFirstTiles::take(std::size_t count, const std::optional<Eigen::Vector2d>& focus) {
+  if (focus) {
+    const auto distance = [&](const Tile& t) {
+      return t.centre.allFinite() ? (t.centre - *focus).squaredNorm() : std::numeric_limits<double>::infinity();
+    };
+    std::stable_sort(left_.begin(), left_.end(),
+                     [&](const Tile& a, const Tile& b) { return distance(a) < distance(b); });
+  }
+  const std::size_t n = std::min(count, left_.size());
+  std::vector<std::string> out;
+  out.reserve(n);
+  for (std::size_t k = 0; k < n; ++k) out.push_back(std::move(left_[k].id));
+  left_.erase(left_.begin(), left_.begin() + static_cast<std::ptrdiff_t>(n));
+  return out;
+}
+
 MapChange MapChange::pcdFile(std::string path) {
   MapChange c;
   c.kind = Kind::kPcdFile;
@@ -97,6 +128,16 @@ void MapUpdateWorker::setMapStoreConfig(const MapStoreConfig& config) {
   if (!problem.empty()) throw std::invalid_argument(problem);
   std::lock_guard<std::mutex> lock(mutex_);
   store_config_ = config;
+}
+
+void MapUpdateWorker::setFocus(const Eigen::Vector2d& position) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  focus_ = position;
+}
+
+std::optional<Eigen::Vector2d> MapUpdateWorker::focus() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return focus_;
 }
 
 void MapUpdateWorker::submit(MapChange change) {
@@ -357,45 +398,50 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
     }
   }
   refetch_.assign(deferred.rbegin(), deferred.rend());  // oldest first, as they failed
-  for (std::size_t k = 0; k < added.size(); ++k) {
-    const std::string& id = added[k];
-    const std::string path = change.dir + "/" + id + ".pcd";  // the prefetch cache's key (a URL for a map store)
-    if (store && k % kTileFetchBatch == 0) {
+  // One fetch batch (or, from disk, as many tiles) at a time, nearest the newest predicted position first: a change
+  // that takes seconds to arrive follows a pose that moves meanwhile.
+  NearestFirstTiles left(added, grid_size);
+  while (!left.empty()) {
+    const std::vector<std::string> chunk = left.take(kTileFetchBatch, focus());
+    if (store) {
       std::vector<std::string> batch;
-      for (std::size_t b = k; b < std::min(k + kTileFetchBatch, added.size()); ++b)
-        if (!(aligned_ && cache_.contains(change.dir + "/" + added[b] + ".pcd"))) batch.push_back(added[b]);
+      for (const std::string& id : chunk)
+        if (!(aligned_ && cache_.contains(change.dir + "/" + id + ".pcd"))) batch.push_back(id);
       fetched.clear();
       for (FetchedTile& t : store->fetch(batch)) fetched[t.id] = std::move(t);
       std::lock_guard<std::mutex> lock(mutex_);
       copyStoreStatus();  // a server that answers again is reported at once, not after the whole change
     }
-    try {
-      std::optional<TileVoxels> cached = aligned_ ? cache_.take(path) : std::nullopt;
-      if (cached) {
-        ++totals_.cache_hits;
-        PendingTile tile;
-        tile.id = id;
-        tile.voxels = std::move(*cached);
-        pending.push_back(std::move(tile));
-      } else {
-        std::string file = path;
-        if (store) {
-          const auto t = fetched.find(id);
-          if (t == fetched.end() || t->second.path.empty()) {
-            refetch_.push_back(id);
-            throw std::runtime_error(t == fetched.end() ? "not fetched from " + change.dir : t->second.error);
+    for (const std::string& id : chunk) {
+      const std::string path = change.dir + "/" + id + ".pcd";  // the prefetch cache's key (a URL for a map store)
+      try {
+        std::optional<TileVoxels> cached = aligned_ ? cache_.take(path) : std::nullopt;
+        if (cached) {
+          ++totals_.cache_hits;
+          PendingTile tile;
+          tile.id = id;
+          tile.voxels = std::move(*cached);
+          pending.push_back(std::move(tile));
+        } else {
+          std::string file = path;
+          if (store) {
+            const auto t = fetched.find(id);
+            if (t == fetched.end() || t->second.path.empty()) {
+              refetch_.push_back(id);
+              throw std::runtime_error(t == fetched.end() ? "not fetched from " + change.dir : t->second.error);
+            }
+            file = t->second.path;
           }
-          file = t->second.path;
+          PointCloud points = readTile(file);
+          pending_points += points.size();
+          timed(totals_.tile_fold_ms, totals_.tile_fold_cpu_ms,
+                [&] { pending.push_back(pendingTile(id, std::move(points))); });
         }
-        PointCloud points = readTile(file);
-        pending_points += points.size();
-        timed(totals_.tile_fold_ms, totals_.tile_fold_cpu_ms,
-              [&] { pending.push_back(pendingTile(id, std::move(points))); });
+      } catch (const std::exception& e) {  // PcdReadError names the file; a bad id says what a tile name is
+        failures.push_back("tile " + id + " skipped: " + e.what());
       }
-    } catch (const std::exception& e) {  // PcdReadError names the file; a bad id says what a tile name is
-      failures.push_back("tile " + id + " skipped: " + e.what());
+      if (pending_points >= kFoldBatchPoints) fold();
     }
-    if (pending_points >= kFoldBatchPoints) fold();
   }
   fold();
 }

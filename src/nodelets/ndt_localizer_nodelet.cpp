@@ -236,6 +236,8 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       reportState(out.state);
     }
     if (out.state != LocalizerState::kTracking) return;
+    // Tiles still loading go nearest the pose the next scans will be matched around first.
+    localizer_->map().setFocus(out.prediction.translation().head<2>());
     if (out.recovered)
       NODELET_WARN("recovered: matching again after %.1f s without an accepted match%s", out.since_last_match,
                    out.global_search ? " (global search)" : "");

@@ -269,3 +269,52 @@ TEST(MapUpdateWorker, TheWorkerThreadIsNicerThanTheScanThread) {
   const int expected = std::min(19, own + gpl::MapUpdateWorker::kWorkerNiceIncrement);
   EXPECT_GE(std::count(after.begin(), after.end(), expected), std::count(before.begin(), before.end(), expected) + 1);
 }
+
+namespace {
+
+// Squared distances of `ids`' tile centres from `focus` [m^2].
+std::vector<double> distances2(const std::vector<std::string>& ids, const Eigen::Vector2d& focus, double s) {
+  std::vector<double> out;
+  for (const std::string& id : ids) {
+    const gpl::TileKey k = gpl::tileKeyOfStem(id, s);
+    out.push_back((Eigen::Vector2d((k.i + 0.5) * s, (k.j + 0.5) * s) - focus).squaredNorm());
+  }
+  return out;
+}
+
+}  // namespace
+
+TEST(NearestFirstTiles, EachBatchHoldsTheTilesNearestTheMovingFocus) {
+  // A 21 x 21 window of 2 m tiles named in (i, j) order, as a delta lists them; the focus (the predicted position)
+  // drives diagonally across it while the batches are taken.
+  const double s = 2.0;
+  std::vector<std::string> ids;
+  for (int i = -10; i <= 10; ++i)
+    for (int j = -10; j <= 10; ++j) ids.push_back(gpl::tileStem(i, j, s));
+  gpl::NearestFirstTiles tiles(ids, s);
+  std::vector<std::string> left = ids;
+  std::size_t taken = 0;
+  for (int step = 0; !tiles.empty(); ++step) {
+    const Eigen::Vector2d focus(-15.0 + 4.0 * step, -12.0 + 3.0 * step);
+    const std::vector<std::string> batch = tiles.take(gpl::kTileFetchBatch, focus);
+    // Closed form: the batch's distances are the smallest of what was left, in ascending order.
+    std::vector<double> expected = distances2(left, focus, s);
+    std::sort(expected.begin(), expected.end());
+    expected.resize(std::min(gpl::kTileFetchBatch, left.size()));
+    EXPECT_EQ(distances2(batch, focus, s), expected) << "batch " << step << " at " << focus.transpose();
+    for (const std::string& id : batch) left.erase(std::find(left.begin(), left.end(), id));
+    taken += batch.size();
+  }
+  EXPECT_EQ(taken, ids.size());
+  EXPECT_TRUE(left.empty());
+}
+
+TEST(NearestFirstTiles, WithoutAFocusKeepsTheChangesOrderAndBadIdsGoLast) {
+  const std::vector<std::string> ids = {"5.0_5.0", "not-a-tile", "1.0_1.0", "3.0_3.0"};
+  gpl::NearestFirstTiles unfocused(ids, 2.0);
+  EXPECT_EQ(unfocused.take(10, std::nullopt), ids);
+  gpl::NearestFirstTiles focused(ids, 2.0);
+  EXPECT_EQ(focused.take(2, Eigen::Vector2d(0.0, 0.0)), (std::vector<std::string>{"1.0_1.0", "3.0_3.0"}));
+  EXPECT_EQ(focused.take(2, Eigen::Vector2d(0.0, 0.0)), (std::vector<std::string>{"5.0_5.0", "not-a-tile"}));
+  EXPECT_TRUE(focused.empty());
+}

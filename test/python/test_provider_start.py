@@ -57,3 +57,20 @@ def test_touches_map_is_the_square_of_the_radius_against_the_tiles_box(server: W
     assert not server.touches_map(SearchRegion(-10.1, 40.0, 10.0, 0.0))
     assert not server.touches_map(SearchRegion(30.0, 200.0, 100.0, 0.0))
     assert server.touches_map(SearchRegion(70.0, 90.0, 10.0, 0.0))  # the corner (60, 80)
+
+
+def distances(keys: list[tuple[int, int]], x: float, y: float) -> list[float]:
+    return [math.hypot((i + 0.5) * S - x, (j + 0.5) * S - y) for i, j in keys]
+
+
+def test_tiles_go_out_nearest_the_pose_or_the_search_centre_first(server: WindowServer):
+    """The localizer loads a delta's tiles in its order: the tiles under the scan come first (issue 58)."""
+    search = server.on_search(SearchRegion(13.0, 9.0, 8.0, 1.0))
+    assert search is not None
+    assert distances(search.delta.added, 13.0, 9.0) == sorted(distances(search.delta.added, 13.0, 9.0))
+    _, whole = server.whole()
+    assert distances(whole.added, 13.0, 9.0) == sorted(distances(whole.added, 13.0, 9.0))
+    server.end_search()
+    moved = server.on_pose(PoseSample(41.0, 7.0, 2.0, 0.0))
+    assert moved is not None and moved.delta.added
+    assert distances(moved.delta.added, 41.0, 7.0) == sorted(distances(moved.delta.added, 41.0, 7.0))

@@ -5,6 +5,7 @@
 
 #include <optional>
 #include <utility>
+#include <vector>
 
 #include "grid_puzzle_localization/map_extent.hpp"
 #include "grid_puzzle_localization/provider/tile_references.hpp"
@@ -20,6 +21,11 @@ struct Served {
   bool changed = false;  ///< the tile set or the bounds changed: a new delta revision is due
   PoseSample pose;       ///< the pose, or the search region's centre, the window was computed for
 };
+
+/// `keys` sorted by the distance of their tile's centre from (x, y) [m], nearest first, ties in (i, j) order: the
+/// localizer loads a delta's tiles in its order, so the tiles under the scan arrive first. Tile side `s` [m]. The twin
+/// of window_server.py's nearest_first.
+void sortNearestFirst(std::vector<TileKey>& keys, double x, double y, double s);
 
 class WindowServer {
  public:
@@ -59,6 +65,7 @@ class WindowServer {
   TileReferences tiles_;
   LostSearchWindow lost_;
   std::optional<Window> window_;  // the window served last
+  PoseSample focus_;              // the pose or search centre it was served for: its tiles go out nearest it first
 };
 
 }  // namespace grid_puzzle_localization

@@ -1,6 +1,20 @@
 #include "grid_puzzle_localization/provider/window_server.hpp"
 
+#include <algorithm>
+#include <tuple>
+
 namespace grid_puzzle_localization {
+
+void sortNearestFirst(std::vector<TileKey>& keys, double x, double y, double s) {
+  const auto distance2 = [&](const TileKey& k) {
+    const double dx = (static_cast<double>(k.i) + 0.5) * s - x;
+    const double dy = (static_cast<double>(k.j) + 0.5) * s - y;
+    return dx * dx + dy * dy;
+  };
+  std::sort(keys.begin(), keys.end(), [&](const TileKey& a, const TileKey& b) {
+    return std::make_tuple(distance2(a), a.i, a.j) < std::make_tuple(distance2(b), b.i, b.j);
+  });
+}
 
 WindowServer::WindowServer(const WindowConfig& window, double max_half_side, TileDirectory directory)
     : tracker_(window, directory.grid_size),
@@ -65,17 +79,20 @@ std::optional<std::pair<Window, ReferenceDelta>> WindowServer::whole() {
   ReferenceDelta delta;
   delta.prefetch = tiles_.update(window_->bounds(), tracker_.predictedWindows()).prefetch;
   delta.added = tiles_.loaded();
+  sortNearestFirst(delta.added, focus_.x, focus_.y, tracker_.s());
   return std::make_pair(*window_, std::move(delta));
 }
 
 Served WindowServer::serve(const PoseSample& pose, const Window& window) {
   Served s;
   s.delta = tiles_.update(window.bounds(), tracker_.predictedWindows());
+  sortNearestFirst(s.delta.added, pose.x, pose.y, tracker_.s());
   s.first = !window_;
   s.changed = s.first || !s.delta.added.empty() || !s.delta.removed.empty() || window.bounds() != window_->bounds();
   s.window = window;
   s.pose = pose;
   window_ = window;
+  focus_ = pose;
   return s;
 }
 

@@ -13,6 +13,20 @@ from dataclasses import dataclass
 from grid_puzzle_localization.provider.lost_search import LostSearchWindow, SearchRegion
 from grid_puzzle_localization.provider.tile_references import ReferenceDelta, TileReferences
 from grid_puzzle_localization.provider.window import PoseSample, Window, WindowTracker, window_covering
+from grid_puzzle_localization.tiles.directory import Key
+
+
+def nearest_first(keys: list[Key], x: float, y: float, s: float) -> list[Key]:
+    """``keys`` sorted by the distance of their tile's centre from (x, y) [m], nearest first, ties in (i, j) order:
+    the localizer loads a delta's tiles in its order, so the tiles under the scan arrive first. Tile side ``s`` [m].
+    The twin of window_server.hpp's sortNearestFirst (the same arithmetic, so both give the same order)."""
+
+    def distance2(key: Key) -> float:
+        dx = (key[0] + 0.5) * s - x
+        dy = (key[1] + 0.5) * s - y
+        return dx * dx + dy * dy
+
+    return sorted(keys, key=lambda k: (distance2(k), k[0], k[1]))
 
 
 @dataclass(frozen=True)
@@ -32,6 +46,7 @@ class WindowServer:
         self.tiles = tiles
         self.lost = LostSearchWindow(max_half_side, tracker.config.n * tracker.s, tracker.s)
         self.window: Window | None = None  # the window served last
+        self.focus = PoseSample(0.0, 0.0, 0.0)  # the pose or search centre it was served for: nearest tiles go first
 
     def end_search(self) -> None:
         """The localizer tracks again: the next pose recomputes the window wherever it is."""
@@ -92,11 +107,15 @@ class WindowServer:
             return None
         # Changes nothing, except after a refresh, which emptied the set: then it loads the new directory's.
         prefetch = self.tiles.update(self.window, self.tracker.predicted_windows()).prefetch
-        return self.window, ReferenceDelta(self.tiles.loaded(), [], prefetch)
+        added = nearest_first(self.tiles.loaded(), self.focus.x, self.focus.y, self.tracker.s)
+        return self.window, ReferenceDelta(added, [], prefetch)
 
     def _serve(self, pose: PoseSample, window: Window) -> Served:
         delta = self.tiles.update(window, self.tracker.predicted_windows())
+        added = nearest_first(delta.added, pose.x, pose.y, self.tracker.s)
+        delta = ReferenceDelta(added, delta.removed, delta.prefetch)
         first = self.window is None
         changed = first or bool(delta.added or delta.removed) or window.bounds != self.window.bounds
         self.window = window
+        self.focus = pose
         return Served(window, delta, first, changed, pose)
