@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # Installs everything the package needs, idempotently and without prompts:
-# Debian packages first, then the Python packages Debian lacks into .venv.
+# Debian packages first, then the Python packages Debian lacks into .venv: the user's (requirements.txt) and the
+# developers' tools (tools/requirements-dev.txt, which includes the user's).
 # Fast when everything is already there (one dpkg-query, one hash comparison).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 apt_list="$root/tools/apt-packages.txt"
-req="$root/tools/requirements.txt"
+req_user="$root/requirements.txt"
+req_dev="$root/tools/requirements-dev.txt"
 venv="$root/.venv"
 
 mapfile -t wanted < <(sed -e 's/#.*//' -e '/^\s*$/d' "$apt_list" | tr -d ' ')
@@ -29,9 +31,9 @@ if [[ ! -x "$venv/bin/python3" ]]; then
   /usr/bin/python3 -m venv --system-site-packages "$venv"
 fi
 stamp="$venv/.requirements.sha256"
-want_hash=$(sha256sum "$req" | cut -d' ' -f1)
+want_hash=$(cat "$req_user" "$req_dev" | sha256sum | cut -d' ' -f1)
 if [[ ! -f "$stamp" || "$(cat "$stamp")" != "$want_hash" ]]; then
-  echo "setup: installing Python packages from $req"
-  "$venv/bin/python3" -m pip install -q --disable-pip-version-check -r "$req"
+  echo "setup: installing Python packages from $req_user and $req_dev"
+  "$venv/bin/python3" -m pip install -q --disable-pip-version-check -r "$req_user" -r "$req_dev"
   echo "$want_hash" >"$stamp"
 fi
