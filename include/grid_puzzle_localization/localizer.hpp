@@ -6,6 +6,7 @@
 #include <Eigen/Geometry>
 #include <cstdint>
 #include <future>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
@@ -260,13 +261,12 @@ class Localizer {
   /// pose farther than the motion bound allows is a false minimum, however well it scores.
   struct Reach {
     Eigen::Vector2d centre = Eigen::Vector2d::Zero();
-    double radius = 0.0;
+    double radius = std::numeric_limits<double>::infinity();  // the default reaches anywhere
     bool holds(const Eigen::Isometry3d& pose) const { return (pose.translation().head<2>() - centre).norm() <= radius; }
   };
   /// Starts the search of `region` for the scan at `stamp` (source_) on its own thread; its pose is taken up within
-  /// `reach` (anywhere when none), as a restart of the track when `restarts_track`.
-  void startBackgroundSearch(double stamp, const SearchRegion& region, bool restarts_track,
-                             const std::optional<Reach>& reach);
+  /// `reach` (anywhere by default), as a restart of the track when `restarts_track`.
+  void startBackgroundSearch(double stamp, const SearchRegion& region, bool restarts_track, const Reach& reach);
   /// Takes up a finished background search: its pose becomes the match of the scan it searched when the track has
   /// not moved since it started and the pose lies within its reach. Returns the time [s] from the last accepted
   /// match to this scan when it was taken up.
@@ -324,7 +324,7 @@ class Localizer {
     double stamp = 0.0;               // of the scan searched
     std::uint64_t track_version = 0;  // when it started: a change since makes its answer stale
     bool restarts_track = false;      // a start's or a gap's search: its pose is a correction, not a motion
-    std::optional<Reach> reach;       // where its pose may lie; none: anywhere in a wrong start's square
+    Reach reach;                      // where its pose may lie; by default anywhere in a wrong start's square
   };
   std::optional<BackgroundSearch> search_;
 };

@@ -215,7 +215,7 @@ void Localizer::waitForSearch() const {
 }
 
 void Localizer::startBackgroundSearch(double stamp, const SearchRegion& region, bool restarts_track,
-                                      const std::optional<Reach>& reach) {
+                                      const Reach& reach) {
   BackgroundSearch job;
   job.stamp = stamp;
   job.track_version = track_version_;
@@ -241,7 +241,7 @@ std::optional<double> Localizer::takeFinishedSearch(double stamp, LocalizerOutpu
   if (job.track_version != track_version_ || !predictor_.initialized()) return std::nullopt;  // the track moved on
   out.global_search = true;
   out.global_search_reason = g.reason;
-  if (!g.found || (job.reach && !job.reach->holds(g.map_T_base))) return std::nullopt;
+  if (!g.found || !job.reach.holds(g.map_T_base)) return std::nullopt;
   const double lost_for = stamp - predictor_.stamp();
   if (job.restarts_track) {
     predictor_.reset(g.map_T_base, job.stamp);
@@ -579,7 +579,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
         found_globally = g.map_T_base;
       }
     } else if (!(fresh && map_loading)) {  // a start whose map is loading is tried again, not searched from
-      startBackgroundSearch(stamp, wide, fresh || long_gap, start_search ? std::nullopt : std::optional(reach));
+      startBackgroundSearch(stamp, wide, fresh || long_gap, start_search ? Reach{} : reach);
       out.search_started = true;
     }
   }
