@@ -36,7 +36,15 @@ demo: build
 	@$(SETUP) bash $(ROOT)/tools/demo.sh
 
 clean:
-	source $(ROOT)/tools/env.sh && rm -rf "$$GPL_WS" $(ROOT)/build $(ROOT)/test_results
+	bash $(ROOT)/tools/noetic_era/run.sh --unmount
+	source $(ROOT)/tools/env.sh && rm -rf --one-file-system "$$GPL_WS" $(ROOT)/build $(ROOT)/test_results
+
+# ---------------------------------------------------------------- the Noetic-era stack (Debian 11 root)
+.PHONY: test-noetic-era
+# A Debian 11 root (cached in build/noetic_era): Debian's ROS 1 and what rosdep resolves from package.xml, then
+# catkin_make with g++-9, every gtest, pytest and rostest, and a run from the install space (docs/development.md).
+test-noetic-era: setup
+	@bash $(ROOT)/tools/noetic_era/run.sh
 
 # ---------------------------------------------------------------- tiler benchmark
 .PHONY: bench-tiling
