@@ -8,6 +8,9 @@ import json
 import os
 import random
 import re
+import socket
+import subprocess
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +22,13 @@ from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.experiment.maps import check_store_tiles
 from grid_puzzle_localization.provider.tile_references import TileReferences, open_store_directory
 from grid_puzzle_localization.tiles.grid import tile_filename
-from grid_puzzle_localization.tiles.map_store import MapStore, MapStoreConfig, unsafe_tile_name
+from grid_puzzle_localization.tiles.map_store import (
+    CLOSING_SERVER_CONNECTIONS,
+    MapStore,
+    MapStoreConfig,
+    keeps_alive,
+    unsafe_tile_name,
+)
 
 pytestmark = pytest.mark.skipif(nginx_server.binary() is None, reason="nginx is not installed (nginx-light)")
 
@@ -77,6 +86,40 @@ def test_fetches_every_tile_checked_and_serves_them_again_from_the_cache(served)
     store.fetch(list(m.tiles))
     assert store.status.tiles_fetched == 8 and store.status.cache_hits == 8
     assert store.revision == "sha256:" + hashlib.sha256((m.dir / "index.json").read_bytes()).hexdigest()[:16]
+
+
+def test_a_server_that_closes_every_connection_gets_few_requests_at_once(served, tmp_path):
+    """A burst of new connections overflows a small accept queue (python3 -m http.server: a backlog of 5), and each
+    dropped one waits out a 1 s SYN retransmission (issue 58). Asserted on the mechanism; bench_map_store measures the
+    rate."""
+    m, server, config = served
+    assert config.max_connections > CLOSING_SERVER_CONNECTIONS
+    assert MapStore(server.url("/map"), config).status.parallel_requests == config.max_connections  # keep-alive
+    port = nginx_server.free_port()
+    python = subprocess.Popen(
+        [sys.executable, "-m", "http.server", "--bind", "127.0.0.1", "--directory", str(m.dir.parent), str(port)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    try:
+        deadline = time.monotonic() + 10.0
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+                break
+            except OSError:
+                assert time.monotonic() < deadline, "python3 -m http.server did not start"
+                time.sleep(0.02)
+        config.cache_dir = str(tmp_path / "python_cache")
+        store = MapStore(f"http://127.0.0.1:{port}/map", config)
+        assert store.status.parallel_requests == CLOSING_SERVER_CONNECTIONS
+        assert [t.error for t in store.fetch(list(m.tiles))] == [""] * 8
+        assert store.status.parallel_requests == CLOSING_SERVER_CONNECTIONS
+    finally:
+        python.terminate()
+        python.wait()
+    assert not keeps_alive(10, "") and keeps_alive(10, "Keep-Alive")
+    assert keeps_alive(11, "") and not keeps_alive(11, "close")
 
 
 def test_a_missing_truncated_corrupt_or_oversized_tile_is_refused_by_url(served):

@@ -39,6 +39,8 @@ struct Transfer {
   std::uint64_t max_bytes = 0;
   curl_slist* headers = nullptr;
   char error[CURL_ERROR_SIZE] = {};
+  bool http10 = false;     // the status line says HTTP/1.0
+  std::string connection;  // the Connection header's tokens, lower case
 };
 
 std::size_t onBody(char* data, std::size_t size, std::size_t count, void* user) {
@@ -53,20 +55,31 @@ std::size_t onBody(char* data, std::size_t size, std::size_t count, void* user) 
   return n;
 }
 
+// `line` without its leading and trailing white space, lower case.
+std::string trimmedLower(const std::string& line) {
+  const auto first = line.find_first_not_of(" \t");
+  const auto last = line.find_last_not_of(" \t\r\n");
+  std::string out = first == std::string::npos ? "" : line.substr(first, last - first + 1);
+  std::transform(out.begin(), out.end(), out.begin(), [](unsigned char c) { return std::tolower(c); });
+  return out;
+}
+
 std::size_t onHeader(char* data, std::size_t size, std::size_t count, void* user) {
   auto* t = static_cast<Transfer*>(user);
   const std::size_t n = size * count;
   t->result->reached = true;
-  std::string line(data, n);
-  if (line.size() > 5) {
-    std::string name = line.substr(0, 5);
-    std::transform(name.begin(), name.end(), name.begin(), [](unsigned char c) { return std::tolower(c); });
-    if (name == "etag:") {
-      std::string value = line.substr(5);
-      const auto first = value.find_first_not_of(" \t");
-      const auto last = value.find_last_not_of(" \t\r\n");
-      t->result->etag = first == std::string::npos ? "" : value.substr(first, last - first + 1);
-    }
+  const std::string line(data, n);
+  const std::string lower = trimmedLower(line);
+  if (lower.rfind("http/", 0) == 0) {  // a status line (a new header block)
+    t->http10 = lower.rfind("http/1.0", 0) == 0;
+    t->connection.clear();
+  } else if (lower.rfind("connection:", 0) == 0) {
+    t->connection = trimmedLower(lower.substr(11));
+  } else if (lower.rfind("etag:", 0) == 0) {
+    const std::string value = line.substr(line.find(':') + 1);  // ETags are case-sensitive
+    const auto first = value.find_first_not_of(" \t");
+    const auto last = value.find_last_not_of(" \t\r\n");
+    t->result->etag = first == std::string::npos ? "" : value.substr(first, last - first + 1);
   }
   return n;
 }
@@ -91,11 +104,30 @@ HttpClient::HttpClient(const MapStoreConfig& config) : config_(config) {
   }
   CURLM* multi = curl_multi_init();
   if (multi == nullptr) throw std::runtime_error("map store: curl_multi_init failed");
-  const long connections = std::max(1, config.max_connections);
-  curl_multi_setopt(multi, CURLMOPT_MAX_TOTAL_CONNECTIONS, connections);
-  curl_multi_setopt(multi, CURLMOPT_MAX_HOST_CONNECTIONS, connections);
-  curl_multi_setopt(multi, CURLMOPT_MAXCONNECTS, connections);
+  curl_multi_setopt(multi, CURLMOPT_MAXCONNECTS, static_cast<long>(std::max(1, config.max_connections)));
   multi_ = multi;
+  limitParallelRequests(config.max_connections);
+}
+
+void HttpClient::limitParallelRequests(int requests) {
+  parallel_ = std::max(1, requests);
+  // Each transfer holds a connection, so the connection limits are the limit of transfers run at once; the others
+  // wait in the multi's queue, in the order they were added.
+  CURLM* multi = static_cast<CURLM*>(multi_);
+  curl_multi_setopt(multi, CURLMOPT_MAX_TOTAL_CONNECTIONS, static_cast<long>(parallel_));
+  curl_multi_setopt(multi, CURLMOPT_MAX_HOST_CONNECTIONS, static_cast<long>(parallel_));
+}
+
+void HttpClient::adaptTo(const std::vector<HttpResult>& results) {
+  bool answered = false, closes = false;
+  for (const HttpResult& r : results) {
+    if (r.status == 0) continue;  // no answer: says nothing about the server's connections
+    answered = true;
+    closes = closes || !r.keeps_alive;
+  }
+  if (answered)
+    limitParallelRequests(closes ? std::min(config_.max_connections, kClosingServerConnections)
+                                 : config_.max_connections);
 }
 
 HttpClient::~HttpClient() { curl_multi_cleanup(static_cast<CURLM*>(multi_)); }
@@ -158,6 +190,8 @@ std::vector<HttpResult> HttpClient::get(const std::vector<HttpGet>& requests) {
     curl_easy_getinfo(h, CURLINFO_NUM_CONNECTS, &connects);
     r.status = status;
     r.connects = connects;
+    r.keeps_alive = t->http10 ? t->connection.find("keep-alive") != std::string::npos
+                              : t->connection.find("close") == std::string::npos;
     if (status > 0) r.reached = true;
     if (code == CURLE_OK) {
       r.transferred = true;
@@ -184,6 +218,7 @@ std::vector<HttpResult> HttpClient::get(const std::vector<HttpGet>& requests) {
     curl_easy_cleanup(handles[k]);
     curl_slist_free_all(transfers[k]->headers);
   }
+  adaptTo(results);
   return results;
 }
 

@@ -1,6 +1,7 @@
-// The map store's HTTP client (libcurl multi): concurrent GETs over kept-alive connections, with connect and
-// transfer timeouts, a body size limit enforced while receiving, TLS verified against the system CA store, and
-// optional bearer or basic credentials (never logged). One attempt per request: the store retries. No ROS.
+// The map store's HTTP client (libcurl multi): concurrent GETs over kept-alive connections (fewer at once to a server
+// that closes every connection: kClosingServerConnections), with connect and transfer timeouts, a body size limit
+// enforced while receiving, TLS verified against the system CA store, and optional bearer or basic credentials (never
+// logged). One attempt per request: the store retries. No ROS.
 #pragma once
 
 #include <cstdint>
@@ -27,6 +28,9 @@ struct HttpResult {
   std::string etag;
   std::string error;  ///< the transport error ("" when transferred)
   long connects = 0;  ///< new connections this request opened
+  /// The answer left its connection open for the next request: HTTP/1.1 without "Connection: close", HTTP/1.0 only
+  /// with "Connection: keep-alive".
+  bool keeps_alive = true;
 };
 
 class HttpClient {
@@ -37,13 +41,19 @@ class HttpClient {
   HttpClient(const HttpClient&) = delete;
   HttpClient& operator=(const HttpClient&) = delete;
 
-  /// Runs `requests` concurrently (at most max_connections at a time) and returns their results in order.
+  /// Runs `requests` concurrently (at most parallelRequests() at a time) and returns their results in order.
   std::vector<HttpResult> get(const std::vector<HttpGet>& requests);
+  /// max_connections, or at most kClosingServerConnections once the server's last answers closed their
+  /// connections (a new connection per request); back to max_connections when it keeps them alive again.
+  int parallelRequests() const { return parallel_; }
 
  private:
   MapStoreConfig config_;
   std::string bearer_, basic_;  // credentials: never logged or put in a message
   void* multi_ = nullptr;       // CURLM*, whose connection cache keeps connections alive between calls
+  int parallel_ = 0;            // requests run at once (the multi's connection limits)
+  void limitParallelRequests(int requests);
+  void adaptTo(const std::vector<HttpResult>& results);
 };
 
 }  // namespace map_store_detail

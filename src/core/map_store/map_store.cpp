@@ -134,6 +134,7 @@ struct StoreState {
   void count(const HttpResult& r) {
     std::lock_guard<std::mutex> lock(status_mutex);
     status.connections_opened += static_cast<std::size_t>(r.connects);
+    status.parallel_requests = client->parallelRequests();
   }
 
   static std::string describe(const HttpResult& r) {
@@ -218,6 +219,7 @@ HttpMapStore::HttpMapStore(const std::string& url, const MapStoreConfig& config)
   makeDirectories(m.dir);
   writeFileAtomically(m.dir + "/url", m.url + "\n");  // which map a directory holds, for a person looking
   m.client = std::make_unique<HttpClient>(config);
+  m.status.parallel_requests = m.client->parallelRequests();
   m.tiles = std::make_unique<DiskCache>(m.dir + "/tiles", config.cache_max_bytes);
   m.status.cache_bytes = m.tiles->bytes();
   // The index a previous run kept: the store can start offline on it.

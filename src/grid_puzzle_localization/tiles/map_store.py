@@ -4,8 +4,9 @@ what `gpm tile` writes (index.json + <cx>_<cy>.pcd) under a URL prefix.
 
 HTTP is urllib3 (Debian's python3-urllib3, also in Ubuntu 20.04): one connection pool kept alive between fetches,
 connect and whole-request timeouts, certificate verification against the system CA store. Tiles are fetched on
-``max_connections`` threads; each body is refused as soon as it passes the size the index gives, then checked
-(size, SHA-256) before it is stored by temporary file and rename. Nothing here imports rospy or numpy.
+``max_connections`` threads (CLOSING_SERVER_CONNECTIONS to a server that closes every connection); each body is
+refused as soon as it passes the size the index gives, then checked (size, SHA-256) before it is stored by temporary
+file and rename. Nothing here imports rospy or numpy.
 """
 
 from __future__ import annotations
@@ -131,6 +132,22 @@ class MapStoreStatus:
     failed_attempts: int = 0
     bytes_fetched: int = 0
     cache_bytes: int = 0
+    parallel_requests: int = 0  # requests run at once now: max_connections, or see CLOSING_SERVER_CONNECTIONS
+
+
+# Requests run at once against a server that closes the connection after every answer (HTTP/1.0 such as
+# `python3 -m http.server`, or "Connection: close"): each request opens a connection, and a burst of them overflows
+# a small accept queue (Python's socketserver: a backlog of 5), where every dropped connection waits out TCP's 1 s
+# SYN retransmission and holds up its whole fetch. Four never overflow a backlog of 5. The twin of
+# kClosingServerConnections in map_store.hpp.
+CLOSING_SERVER_CONNECTIONS = 4
+
+
+def keeps_alive(version: int, connection: str) -> bool:
+    """True when an answer of HTTP ``version`` (10, 11, ...) with this Connection header leaves its connection open:
+    HTTP/1.1 unless "close", HTTP/1.0 only with "keep-alive"."""
+    tokens = connection.lower()
+    return "keep-alive" in tokens if version == 10 else "close" not in tokens
 
 
 @dataclass
@@ -290,7 +307,9 @@ class MapStore:
             timeout=urllib3.Timeout(connect=self.config.connect_timeout, total=self.config.transfer_timeout),
         )
         self._lock = threading.Lock()  # status
-        self.status = MapStoreStatus(self.url, cache_bytes=self._tiles.bytes)
+        self.status = MapStoreStatus(
+            self.url, cache_bytes=self._tiles.bytes, parallel_requests=self.config.max_connections
+        )
         self.grid_size = 0.0
         self.tiles: dict[str, IndexTile] = {}
         self.etag = ""
@@ -355,6 +374,7 @@ class MapStore:
             )
         except self._urllib3.exceptions.HTTPError as err:
             return 0, b"", "", str(err), False, False
+        self._adapt_to(response.version, response.headers.get("Connection", ""))
         deadline = start + self.config.transfer_timeout
         try:
             length = response.headers.get("Content-Length")
@@ -380,6 +400,13 @@ class MapStore:
             return 0, b"", "", str(err), True, False
         finally:
             response.release_conn()
+
+    def _adapt_to(self, version: int, connection: str) -> None:
+        """Fewer requests at once while the server closes its connection after every answer (the last answer
+        decides), max_connections while it keeps them alive."""
+        closing = min(self.config.max_connections, CLOSING_SERVER_CONNECTIONS)
+        with self._lock:
+            self.status.parallel_requests = self.config.max_connections if keeps_alive(version, connection) else closing
 
     @staticmethod
     def _retryable(status: int, too_large: bool) -> bool:
@@ -492,47 +519,47 @@ class MapStore:
                 self._tiles.remove(name)  # damaged on disk: fetched again
             missing.append(t)
         attempts = 1 + self.config.max_retries if self.status.reachable else 1
-        with ThreadPoolExecutor(self.config.max_connections) as pool:
-            for attempt in range(attempts):
-                if not missing:
-                    break
-                if attempt:
-                    self._pause(attempt)
-                tiles = [self.tiles[t.id] for t in missing]
+        for attempt in range(attempts):
+            if not missing:
+                break
+            if attempt:
+                self._pause(attempt)
+            tiles = [self.tiles[t.id] for t in missing]
+            with ThreadPoolExecutor(self.status.parallel_requests) as pool:
                 results = list(
                     pool.map(
                         lambda tile: self._get(f"{self.url}/{tile.file}", min(tile.bytes, self.config.max_tile_bytes)),
                         tiles,
                     )
                 )
-                again = []
-                any_reached = False
-                for t, tile, (status, body, _, error, reached, too_large) in zip(missing, tiles, results):
-                    any_reached = any_reached or reached
-                    retry = False
-                    if too_large:
-                        why = f"larger than the index's {tile.bytes} bytes; refused before it was stored"
-                    elif error or status != 200:
-                        why = error or f"HTTP {status}"
-                        retry = self._retryable(status, too_large)
-                    else:
-                        why = self._mismatch(tile, body)
-                        retry = bool(why)
-                    if not why:
-                        name = self._cache_name(tile)
-                        self._tiles.store(name, body)
-                        self._tiles.pinned.add(name)
-                        t.path, t.error = self._tiles.path(name), ""
-                        self.status.tiles_fetched += 1
-                        self.status.bytes_fetched += len(body)
-                        continue
-                    t.error = f"{self.url}/{tile.file}: {why}"
-                    self._fail(t.error, reached)
-                    if retry:
-                        again.append(t)
-                if any_reached:
-                    self.status.reachable = True
-                missing = again
+            again = []
+            any_reached = False
+            for t, tile, (status, body, _, error, reached, too_large) in zip(missing, tiles, results):
+                any_reached = any_reached or reached
+                retry = False
+                if too_large:
+                    why = f"larger than the index's {tile.bytes} bytes; refused before it was stored"
+                elif error or status != 200:
+                    why = error or f"HTTP {status}"
+                    retry = self._retryable(status, too_large)
+                else:
+                    why = self._mismatch(tile, body)
+                    retry = bool(why)
+                if not why:
+                    name = self._cache_name(tile)
+                    self._tiles.store(name, body)
+                    self._tiles.pinned.add(name)
+                    t.path, t.error = self._tiles.path(name), ""
+                    self.status.tiles_fetched += 1
+                    self.status.bytes_fetched += len(body)
+                    continue
+                t.error = f"{self.url}/{tile.file}: {why}"
+                self._fail(t.error, reached)
+                if retry:
+                    again.append(t)
+            if any_reached:
+                self.status.reachable = True
+            missing = again
         self._tiles.evict()
         self.status.cache_bytes = self._tiles.bytes
         return out
