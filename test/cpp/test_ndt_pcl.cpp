@@ -1,6 +1,7 @@
 // RADIUS search against PCL 1.13's pcl::NormalDistributionsTransform on the same input, with settings under which
 // PCL converges: the two final poses must agree within 1 mm and 0.01 deg.
 #include <gtest/gtest.h>
+#include <pcl/pcl_config.h>
 #include <pcl/point_types.h>
 #include <pcl/registration/ndt.h>
 
@@ -57,8 +58,17 @@ TEST(NdtVersusPcl, RadiusSearchLandsOnPclsPose) {
             << " mm " << gpl::synthetic::poseError(truth, ours.transform.cast<double>()).second << " deg; ";
   std::cout << "ours vs PCL: " << te * 1000 << " mm, " << re << " deg (PCL " << ndt.getFinalNumIteration()
             << " iterations, ours " << ours.iterations << "); PCL vs truth " << te_truth * 1000 << " mm" << std::endl;
+#if PCL_VERSION_COMPARE(<, 1, 12, 1)
+  // Before 1.12.1 PCL's NDT Hessian has a sign error (PCL issue 4888: the pitch-squared term), so its Newton steps stop
+  // short of the optimum (PCL 1.11: 7.8 mm from the truth here) and it is no sub-millimetre reference. Ours must still
+  // land at least as near the truth as PCL does.
+  const auto [te_ours, re_ours] = gpl::synthetic::poseError(truth, ours.transform.cast<double>());
+  EXPECT_LE(te_ours, te_truth + 0.001);
+  EXPECT_LE(re_ours, re_truth + 0.01);
+#else
   EXPECT_LT(te, 0.001);
   EXPECT_LT(re, 0.01);
+#endif
 }
 
 }  // namespace
