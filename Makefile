@@ -41,7 +41,7 @@ clean:
 
 # ---------------------------------------------------------------- the Noetic-era stack (Debian 11 root)
 .PHONY: test-noetic-era
-# A Debian 11 root (cached in build/noetic_era): Debian's ROS 1 and what rosdep resolves from package.xml, then
+# A Debian 11 root (cached in $GPL_WS/noetic_era): Debian's ROS 1 and what rosdep resolves from package.xml, then
 # catkin_make with g++-9, every gtest, pytest and rostest, and a run from the install space (docs/development.md).
 test-noetic-era: setup
 	@bash $(ROOT)/tools/noetic_era/run.sh

@@ -2,14 +2,16 @@
 # make test-noetic-era: the package as a Noetic user gets it, on Debian 11 (bullseye), the closest stand-in for
 # Ubuntu 20.04 + Noetic these machines run (g++-9 9.3, Ceres 1.14, Eigen 3.3, PCL 1.11, Boost 1.74, Python 3.9,
 # catkin 0.8.9, ros_comm 1.15.9). Needs root (debootstrap, chroot, mounts). docs/development.md says more.
-#  1. a bullseye root made once with debootstrap, cached in build/noetic_era/root (`make clean` removes it);
+#  1. a bullseye root made once with debootstrap, cached in the catkin workspace folder ($GPL_WS/noetic_era; outside
+#     the package, whose directory rostest walks) and reused while it exists (`make clean` removes it);
 #  2. Debian's ROS 1 packages for package.xml's ROS keys (debian_ros_packages.txt) and the apt packages that
 #     rosdep resolves for package.xml's system keys (tools/check_rosdep.py), then requirements.txt with pip;
 #  3. the checkout's files copied into a catkin workspace's src/, and inside.sh run there: catkin_make with g++-9
 #     and tests on, every gtest, pytest and rostest, catkin_make install and a tracking run from the install space.
 set -euo pipefail
-repo="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
-era="$repo/build/noetic_era"
+source "$(dirname "${BASH_SOURCE[0]}")/../env.sh"
+repo="$gpl_root"
+era="$gpl_ws/noetic_era"
 rootfs="$era/root"
 mirror="http://deb.debian.org/debian"
 here="$repo/tools/noetic_era"
@@ -94,13 +96,16 @@ install_packages() {
   printf '%s\n' "$wanted" >"$stamp"
 }
 
-# The checkout as a user clones it: the files git knows (tracked, and new ones not ignored), nothing built.
+# The checkout as a user clones it: the files git knows (tracked, and new ones not ignored), nothing built. Only the
+# files that changed since the last run are copied (with the time of the copy), so catkin_make rebuilds exactly
+# what they touch: a file's own modification time may be older than the objects built from its previous version.
 copy_checkout() {
-  local src="$rootfs/ws/src/grid_puzzle_localization"
-  rm -rf "$src"
-  mkdir -p "$src"
+  local stage="$era/checkout"
+  rm -rf "$stage"
+  mkdir -p "$stage" "$rootfs/ws/src/grid_puzzle_localization"
   git -C "$repo" ls-files -z --cached --others --exclude-standard \
-    | tar -C "$repo" --null --no-recursion --ignore-failed-read -T - -cf - 2>/dev/null | tar -xf - -C "$src"
+    | tar -C "$repo" --null --no-recursion --ignore-failed-read -T - -cf - 2>/dev/null | tar -xf - -C "$stage"
+  rsync -rlp --checksum --delete "$stage/" "$rootfs/ws/src/grid_puzzle_localization/"
 }
 
 if [[ ${1:-} == --unmount ]]; then  # make clean: what a killed run left mounted
