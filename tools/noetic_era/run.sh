@@ -45,8 +45,9 @@ mount_root() {
     mounted+=("$rootfs/$dir")
   done
   cp /etc/resolv.conf "$rootfs/etc/resolv.conf"
-  # debootstrap writes no /etc/hosts, and roslaunch must resolve localhost.
-  printf '127.0.0.1\tlocalhost\n::1\tlocalhost ip6-localhost ip6-loopback\n' >"$rootfs/etc/hosts"
+  # debootstrap writes no /etc/hosts, and ROS nodes must resolve localhost and this machine's name.
+  printf '127.0.0.1\tlocalhost\n127.0.1.1\t%s\n::1\tlocalhost ip6-localhost ip6-loopback\n' "$(hostname)" \
+    >"$rootfs/etc/hosts"
   # pip inside the root reaches the package index only with the host's CA certificates.
   cp /etc/ssl/certs/ca-certificates.crt "$rootfs/etc/host-ca-certificates.crt"
 }
