@@ -23,7 +23,7 @@ GPL_WS=$ws bash "$pkg/tools/run_tests.sh" gtest pytest rostest || status=1
 log "catkin_make install; a short simulated drive from the devel space"
 catkin_make -j"$(nproc)" install >>"$ws/build.log" 2>&1 || { tail -60 "$ws/build.log"; exit 1; }
 rm -rf "$check" && mkdir -p "$check"
-(source devel/setup.bash && gpm simulate courtyard --scale 0.2 --duration 8 --seed 2 -o "$check/scenario" --quiet)
+(set +u && source devel/setup.bash && gpm simulate courtyard --scale 0.2 --duration 8 --seed 2 -o "$check/scenario" --quiet)
 
 log "gpm experiment from the install space alone (devel space and sources moved away)"
 restore() { [[ -d $ws/devel.away ]] && mv "$ws/devel.away" "$ws/devel"; [[ -d $ws/src.away ]] && mv "$ws/src.away" "$ws/src"; }
@@ -33,6 +33,7 @@ mv "$ws/devel" "$ws/devel.away"
 mv "$ws/src" "$ws/src.away"
 (
   cd "$check"
+  set +u  # the setup files read unset variables (Debian's /etc/catkin/profile.d: ROS_DISTRO)
   source "$ws/install/setup.bash"
   strace -f -qq -e trace=openat,execve -e signal=none -o "$check/files.trace" \
     gpm experiment "$check/scenario" -o "$check/out" --modes grid_puzzle --preset demo --settle 1.5 >"$check/experiment.log" 2>&1 \
