@@ -26,7 +26,10 @@ rm -rf "$check" && mkdir -p "$check"
 (set +u && source devel/setup.bash && gpm simulate courtyard --scale 0.2 --duration 8 --seed 2 -o "$check/scenario" --quiet)
 
 log "gpm experiment from the install space alone (devel space and sources moved away)"
-restore() { [[ -d $ws/devel.away ]] && mv "$ws/devel.away" "$ws/devel"; [[ -d $ws/src.away ]] && mv "$ws/src.away" "$ws/src"; }
+restore() {  # returns 0 when there is nothing to move back: as the EXIT trap, under set -e, its status is the script's
+  if [[ -d $ws/devel.away ]]; then mv "$ws/devel.away" "$ws/devel"; fi
+  if [[ -d $ws/src.away ]]; then mv "$ws/src.away" "$ws/src"; fi
+}
 trap restore EXIT
 cp "$pkg/tools/noetic_era/install_space_report.py" "$check/"
 mv "$ws/devel" "$ws/devel.away"
