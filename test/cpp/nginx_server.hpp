@@ -49,6 +49,22 @@ inline bool acceptsOn(int port) {
   return ok;
 }
 
+/// Waits until the server process `pid` accepts connections on `port`; throws, naming `name` and `detail()`, when it
+/// exits first (then sets `pid` to -1) or does not within 10 s.
+template <typename Detail>
+void waitUntilAccepting(pid_t& pid, int port, const std::string& name, Detail detail) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (!acceptsOn(port)) {
+    int status = 0;
+    if (::waitpid(pid, &status, WNOHANG) == pid) {
+      pid = -1;
+      throw std::runtime_error(name + " exited at start-up" + detail());
+    }
+    if (std::chrono::steady_clock::now() > deadline) throw std::runtime_error(name + " did not start" + detail());
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+}
+
 class NginxServer {
  public:
   /// The nginx binary on PATH or in /usr/sbin, "" when there is none.
@@ -92,16 +108,7 @@ class NginxServer {
       ::execl(bin.c_str(), bin.c_str(), "-c", conf.c_str(), "-p", prefix.c_str(), static_cast<char*>(nullptr));
       ::_exit(127);
     }
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-    while (!acceptsOn(port_)) {
-      int status = 0;
-      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
-        pid_ = -1;
-        throw std::runtime_error("nginx exited at start-up: " + log());
-      }
-      if (std::chrono::steady_clock::now() > deadline) throw std::runtime_error("nginx did not start: " + log());
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
+    waitUntilAccepting(pid_, port_, "nginx", [this] { return ": " + log(); });
   }
 
   /// Stops nginx (SIGTERM: it closes its connections at once) and waits for it.

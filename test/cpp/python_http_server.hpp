@@ -7,10 +7,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include <chrono>
 #include <stdexcept>
 #include <string>
-#include <thread>
 
 #include "nginx_server.hpp"
 
@@ -31,16 +29,7 @@ class PythonHttpServer {
                port.c_str(), static_cast<char*>(nullptr));
       ::_exit(127);
     }
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
-    while (!acceptsOn(port_)) {
-      int status = 0;
-      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
-        pid_ = -1;
-        throw std::runtime_error("python3 -m http.server exited at start-up");
-      }
-      if (std::chrono::steady_clock::now() > deadline) throw std::runtime_error("python3 -m http.server did not start");
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    }
+    waitUntilAccepting(pid_, port_, "python3 -m http.server", [] { return std::string(); });
   }
   ~PythonHttpServer() {
     ::kill(pid_, SIGTERM);
