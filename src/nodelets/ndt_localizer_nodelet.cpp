@@ -39,6 +39,7 @@
 #include "saved_pose.hpp"
 #include "tile_delta_input.hpp"
 #include "warning_throttle.hpp"
+#include "window_request.hpp"
 
 namespace grid_puzzle_localization {
 
@@ -92,6 +93,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       map_sub_ = mt_nh.subscribe("tile_delta", 100, &NdtLocalizerNodelet::onTileDelta, this);
       tile_input_ = std::make_unique<TileDeltaInput>(mt_nh.serviceClient<std_srvs::Trigger>(params_.resend_service),
                                                      params_.core.ndt.resolution, getName());
+      window_request_ = std::make_unique<WindowRequest>(mt_nh, params_.resend_service, getName());
     } else {
       localizer_->map().submit(MapChange::pcdFile(params_.pcd_path));
     }
@@ -128,7 +130,10 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     std::optional<MapChange> change = tile_input_->accept(*msg, localizer_->map());
     if (!change) return;
     localizer_->map().submit(std::move(*change));
-    if (msg->reset) ++map_replacements_;
+    if (msg->reset) {
+      ++map_replacements_;
+      window_request_->received();
+    }
   }
 
   bool checkMapFrame(const std::string& frame, const char* topic) {
@@ -427,6 +432,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   std::unique_ptr<MapTfBroadcaster> map_tf_;               // scan thread only
   std::map<std::string, Eigen::Isometry3d> static_cache_;  // scan thread only
   std::unique_ptr<TileDeltaInput> tile_input_;             // tiles mode; tile_delta callback only (never concurrent)
+  std::unique_ptr<WindowRequest> window_request_;          // tiles mode: asks for the window until one comes
   std::optional<LocalizerState> last_state_;               // for logging each state change once
   std::atomic<int> map_replacements_{0};                   // whole maps taken (multi-threaded queue)
   int map_replacements_seen_ = 0;                          // scan thread: map_replacements_ at the last map swap
