@@ -115,6 +115,10 @@ struct LocalizerConfig {
     return c;
   }();
   double time_jump_back = 0.5;  ///< [s] a scan this much older than the last one resets the localizer
+  /// [m] > 0: with a window of tiles that is still arriving (a slow map store), a start, a search and a failed match
+  /// wait for the window's tiles in flight within the square of this half side around the pose (a search: around
+  /// its region) instead of running on a partial map or counting as lost.
+  double map_wait_half_side = 20.0;
   bool output_aligned = false;  ///< fill LocalizerOutput::aligned (costs a copy per scan)
 
   /// Empty when usable, else every bad value with its allowed range (includes the nested configs).
@@ -172,6 +176,10 @@ struct LocalizerOutput {
   double scan_ms = 0.0;   ///< whole processScan, including preprocessing and the swap
   std::size_t target_voxels = 0;
   std::size_t target_points = 0;
+  std::size_t tiles_in_flight = 0;  ///< tiles of the provider's window not in the map yet (loading, fetching)
+  /// Of those, the tiles near the pose this scan waited for (map_wait_half_side): the start waits for them; a match
+  /// that failed meanwhile is not lost and starts no search. 0 when nothing was waited for.
+  std::size_t tiles_awaited = 0;
   PointCloud aligned;  ///< map frame, when config.output_aligned and tracking
 };
 
@@ -235,6 +243,9 @@ class Localizer {
   /// always with a whole map (nothing lies outside it); with a window of tiles when the provider's window holds the
   /// square (where it has no tile the map has no point), or without that window when the tiles' extent holds it.
   bool mapHolds(const Eigen::Vector3d& centre, double half) const;
+  /// Tiles of the window still in flight that meet the square of half side `half` [m] about `centre` (x y, map
+  /// frame), as of the map the last scan was matched on.
+  std::size_t tilesAwaited(const Eigen::Vector2d& centre, double half) const { return in_flight_.within(centre, half); }
   /// The pose of the last accepted match, if any since the last reset.
   std::optional<Eigen::Isometry3d> lastAcceptedPose() const;
   /// Blocks until a background search that is running has finished, so that the next scan takes up its answer
@@ -296,6 +307,7 @@ class Localizer {
   NdtAligner carried_aligner_;  // aligner_ with at most kCarriedMatchIterations (localizer.cpp)
   MapUpdateWorker worker_;
   std::shared_ptr<const VoxelMap> target_;
+  TilesInFlight in_flight_;  // the window's tiles target_ does not hold yet
   PosePredictor predictor_;
   std::optional<Twist> last_twist_;  // the last measured body twist; a recovery's predictor reset keeps it
   GyroIntegrator gyro_;

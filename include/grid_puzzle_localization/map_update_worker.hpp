@@ -1,8 +1,9 @@
 // Background preparation of the NDT target: map changes are queued from any thread, applied by one
-// worker thread, and the resulting immutable snapshot is handed to the scan thread with an atomic
-// shared_ptr exchange, so a map update never blocks scan matching. No ROS.
+// worker thread, and the resulting immutable snapshot is handed to the scan thread under a brief lock,
+// so a map update never blocks scan matching. No ROS.
 #pragma once
 
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
@@ -84,16 +85,34 @@ class NearestFirstTiles {
   std::vector<Tile> left_;
 };
 
+/// Tiles of the provider's window that the map does not hold yet: named by the changes being applied and not yet
+/// read (or fetched) and folded in. A tile whose read or fetch failed is not in flight: its error says why.
+struct TilesInFlight {
+  double tile_size = 0.0;  ///< [m]
+  std::vector<TileKey> keys;
+  /// How many of them meet the square of half side `half` [m] about `centre` (x y, map frame).
+  std::size_t within(const Eigen::Vector2d& centre, double half) const;
+};
+
+/// A snapshot of the target with the tiles of the window it does not hold yet.
+struct MapSnapshot {
+  std::shared_ptr<const VoxelMap> map;
+  TilesInFlight in_flight;
+};
+
 /// What the last finished update did.
 struct MapUpdateStats {
-  std::uint64_t generation = 0;  ///< snapshots published so far
-  double update_ms = 0.0;        ///< wall time to apply the last batch of changes and snapshot [ms]
-  std::size_t changes = 0;       ///< changes applied in the last batch
-  std::size_t tiles = 0;         ///< tiles loaded (tiles mode)
-  std::size_t voxels = 0;        ///< voxels with a valid Gaussian in the last snapshot
-  std::size_t points = 0;        ///< points summed into the last snapshot
-  std::size_t map_bytes = 0;     ///< heap bytes of the last snapshot's voxel storage (VoxelMap::bytes)
-  bool tile_aligned = false;     ///< tiles mode: voxels are tile-aligned (see MapChange)
+  std::uint64_t generation = 0;  ///< snapshots of whole batches published so far
+  /// Snapshots published while a change was still loading (a slow map store, a large window): the tiles nearest the
+  /// pose arrive first and are matched on while the rest comes (every kPartialSnapshotPeriod at most).
+  std::uint64_t partial_snapshots = 0;
+  double update_ms = 0.0;     ///< wall time to apply the last batch of changes and snapshot [ms]
+  std::size_t changes = 0;    ///< changes applied in the last batch
+  std::size_t tiles = 0;      ///< tiles loaded (tiles mode)
+  std::size_t voxels = 0;     ///< voxels with a valid Gaussian in the last snapshot
+  std::size_t points = 0;     ///< points summed into the last snapshot
+  std::size_t map_bytes = 0;  ///< heap bytes of the last snapshot's voxel storage (VoxelMap::bytes)
+  bool tile_aligned = false;  ///< tiles mode: voxels are tile-aligned (see MapChange)
   // Tiles by reference, totals since start:
   std::size_t tiles_read = 0;        ///< tile files read (window and prefetch)
   std::size_t tile_points_read = 0;  ///< points in them
@@ -139,9 +158,13 @@ class MapUpdateWorker {
   /// while the worker is busy becomes one batch and one snapshot.
   void submit(MapChange change);
 
-  /// The snapshot published since the last call, or nullptr. Thread-safe, wait-free for the caller in
-  /// practice (an atomic shared_ptr exchange); a caller keeps the previous snapshot until it gets one.
+  /// The snapshot published since the last call, or nullptr. Thread-safe; the worker holds the lock only briefly. A
+  /// caller keeps the previous snapshot until it gets one.
   std::shared_ptr<const VoxelMap> takeReady();
+  /// takeReady() with the tiles of the window that snapshot does not hold yet.
+  std::optional<MapSnapshot> takeSnapshot();
+  /// While a change loads, a snapshot of the tiles that have arrived is published at most this often [s].
+  static constexpr double kPartialSnapshotPeriod = 0.25;
 
   /// Hands a snapshot the caller is done with to the worker thread, which drops it there: freeing an old map
   /// (its voxel buffers) is background work, not the scan thread's. Thread-safe, returns at once.
@@ -180,6 +203,12 @@ class MapUpdateWorker {
   // The map store of `url` at `revision` (opened, or its index polled, as needed); throws std::invalid_argument
   // when it cannot be opened or the server's index is of another revision.
   MapStore& storeAt(const std::string& url, const std::string& revision);
+  // The window tiles of `batch` not loaded yet (in_flight_), before it is applied.
+  void planInFlight(const std::deque<MapChange>& batch);
+  void landed(const std::string& id);  // a tile left in_flight_: folded in, or failed
+  // Publishes the target with the tiles still in flight; `partial` while a change is loading. mutex_ not held.
+  void publish(const NdtTarget& target, bool partial, double update_ms, std::size_t changes,
+               std::vector<std::string>& failures);
   void readAhead();        // prefetch while nothing is queued
   void copyStoreStatus();  // the map store's status into stats_; mutex_ held
   std::optional<Eigen::Vector2d> focus() const;
@@ -194,7 +223,7 @@ class MapUpdateWorker {
   bool stop_ = false;
   MapUpdateStats stats_;
   std::vector<std::string> errors_;
-  std::shared_ptr<const VoxelMap> ready_;  // accessed only with std::atomic_load/exchange/store
+  std::optional<MapSnapshot> ready_;  // the newest snapshot not yet taken
   // Owned by the worker thread only.
   VoxelMapParams params_;
   struct LoadedTile {
@@ -215,7 +244,10 @@ class MapUpdateWorker {
   std::vector<std::string> refetch_;       // worker thread only: window tiles its fetch failed, tried again
   bool prefetching_ = false;               // guarded by mutex_
   std::optional<Eigen::Vector2d> focus_;   // guarded by mutex_: the newest predicted position
-  MapUpdateStats totals_;                  // worker thread only: the by-reference totals of stats_
+  std::unordered_map<std::string, TileKey> in_flight_;  // worker thread only: window tiles not loaded yet, by id
+  double in_flight_size_ = 0.0;                         // worker thread only: their tile side [m]
+  std::chrono::steady_clock::time_point published_;     // worker thread only: when the last snapshot went out
+  MapUpdateStats totals_;                               // worker thread only: the by-reference totals of stats_
   std::thread worker_;
 };
 

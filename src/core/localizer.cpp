@@ -424,9 +424,10 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   }
   last_stamp_ = stamp;
   out.map_update_pending = worker_.busy();
-  if (std::shared_ptr<const VoxelMap> next = worker_.takeReady()) {
+  if (std::optional<MapSnapshot> next = worker_.takeSnapshot()) {
     // The old snapshot may hold the last reference to thousands of voxel buffers: the worker frees them.
-    worker_.retire(std::exchange(target_, std::move(next)));
+    worker_.retire(std::exchange(target_, std::move(next->map)));
+    in_flight_ = std::move(next->in_flight);
     out.map_swapped = true;
     if (global_target_ && !search_) {
       // The search structures of an older target would be rebuilt before the next search anyway, and they hold
@@ -439,7 +440,11 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     out.target_voxels = target_->gaussianCount();
     out.target_points = target_->pointCount();
   }
-  if (!target_ || target_->gaussianCount() == 0) {
+  out.tiles_in_flight = in_flight_.keys.size();
+  // A given pose is matched from once the tiles around it have arrived: a partial map could fit the scan elsewhere.
+  if (pending_initial_pose_)
+    out.tiles_awaited = tilesAwaited(pending_initial_pose_->translation().head<2>(), config_.map_wait_half_side);
+  if (!target_ || target_->gaussianCount() == 0 || out.tiles_awaited > 0) {
     out.state = LocalizerState::kWaitingForMap;
     out.scan_ms = msSince(start);
     return out;
@@ -555,16 +560,25 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   // bounded region (every yaw after a gap when the rotation is not known), at most once per search_period. A given
   // pose that the scan does not fit is wrong: once the map held reaches around it, the square of
   // lost/initial_pose_search_size around it is searched at once, every yaw.
-  const bool map_loading = out.map_update_pending || worker_.busy();
+  // The map of a given start is still loading: the window's change in progress, or its tiles in flight around the
+  // start's search square. The start is then tried again at the next scan, not searched from.
+  const double start_half = 0.5 * config_.lost.initial_pose_search_size;
+  const std::size_t start_awaited =
+      fresh ? tilesAwaited(held.translation().head<2>(), std::max(start_half, config_.map_wait_half_side)) : 0;
+  const bool start_map_loading = fresh && (out.map_update_pending || worker_.busy() || start_awaited > 0);
+  // Tiles still in flight around the pose or in its bounded region: a failed match or a search there waits for them
+  // (on a partial map a search is ambiguous, or finds a look-alike place) and is not lost.
+  const std::size_t awaited =
+      tilesAwaited(held.translation().head<2>(), std::max(config_.map_wait_half_side, region.radius));
   const bool search_due = !long_gap || !last_global_search_ ||
                           stamp - *last_global_search_ >= config_.lost.search_period || stamp < *last_global_search_;
   std::optional<Eigen::Isometry3d> found_globally;
-  if ((!best || poor(*best)) && search_due && !search_ && !search_refused) {
+  if ((!best || poor(*best)) && search_due && !search_ && !search_refused && awaited == 0) {
     SearchRegion wide = region;
     if (long_gap && !rotation_known) wide.yaw_range = M_PI;
     // The square around a wrong start bounds where the pose is; no motion since it bounds it further.
-    const double start_half = 0.5 * config_.lost.initial_pose_search_size;
-    const bool start_search = fresh && !map_loading && start_half > 0.0 && mapHolds(held.translation(), start_half);
+    const bool start_search =
+        fresh && !start_map_loading && start_half > 0.0 && mapHolds(held.translation(), start_half);
     if (start_search) {
       wide.radius = std::max(wide.radius, start_half);
       wide.yaw_range = M_PI;
@@ -578,7 +592,7 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
         best = g.refinement;
         found_globally = g.map_T_base;
       }
-    } else if (!(fresh && map_loading)) {  // a start whose map is loading is tried again, not searched from
+    } else if (!start_map_loading) {  // a start whose map is loading is tried again, not searched from
       startBackgroundSearch(stamp, wide, fresh || long_gap, start_search ? Reach{} : reach);
       out.search_started = true;
     }
@@ -601,17 +615,19 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     out.pose = found_globally ? *found_globally : toIsometry(out.ndt.transform);
     if (!out.pose.matrix().allFinite()) out.match_accepted = false;
   }
-  if (fresh && !out.match_accepted && map_loading) {
+  if (!out.match_accepted && start_map_loading) {
     // The map around a new initial pose may still be loading (a window of tiles arrives over the first scans): the
     // pose is kept for the next scan instead of being searched from as a lost track.
     pending_initial_pose_ = predictor_.pose();
     predictor_ = PosePredictor();
     ++track_version_;
     out.state = LocalizerState::kWaitingForMap;
+    out.tiles_awaited = start_awaited;
     out.scan_ms = msSince(start);
     return out;
   }
-  out.lost = !out.match_accepted;
+  if (!out.match_accepted) out.tiles_awaited = awaited;
+  out.lost = !out.match_accepted && awaited == 0;
   if (fresh && out.lost) start_refused_ = true;
   if (out.lost) out.search_region = region;
   out.since_last_match = fresh ? 0.0 : elapsed;

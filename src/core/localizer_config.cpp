@@ -59,6 +59,7 @@ std::string LocalizerConfig::validate() const {
   if (!global_problem.empty()) err << "global_localization: " << global_problem << "; ";
   if (!(map_update_threads >= 0)) err << "map_update_threads must be >= 0 (0 = all cores); ";
   if (!(time_jump_back > 0.0)) err << "time_jump_back must be > 0 s (got " << time_jump_back << "); ";
+  if (!(map_wait_half_side > 0.0)) err << "map_wait_half_side must be > 0 m (got " << map_wait_half_side << "); ";
   return err.str();
 }
 

@@ -14,6 +14,7 @@
 #include <limits>
 #include <stdexcept>
 #include <unordered_set>
+#include <utility>
 #if defined(__GLIBC__)
 #include <malloc.h>
 #endif
@@ -93,6 +94,16 @@ std::vector<std::string> NearestFirstTiles::take(std::size_t count, const std::o
   return out;
 }
 
+std::size_t TilesInFlight::within(const Eigen::Vector2d& centre, double half) const {
+  std::size_t n = 0;
+  for (const TileKey& key : keys) {
+    const Eigen::Vector2d low(static_cast<double>(key.i) * tile_size, static_cast<double>(key.j) * tile_size);
+    const Eigen::Vector2d far = (low.array() + tile_size).matrix();
+    if ((low.array() < centre.array() + half).all() && (far.array() > centre.array() - half).all()) ++n;
+  }
+  return n;
+}
+
 MapChange MapChange::pcdFile(std::string path) {
   MapChange c;
   c.kind = Kind::kPcdFile;
@@ -148,8 +159,14 @@ void MapUpdateWorker::submit(MapChange change) {
   wake_.notify_one();
 }
 
+std::optional<MapSnapshot> MapUpdateWorker::takeSnapshot() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return std::exchange(ready_, std::nullopt);
+}
+
 std::shared_ptr<const VoxelMap> MapUpdateWorker::takeReady() {
-  return std::atomic_exchange(&ready_, std::shared_ptr<const VoxelMap>());
+  std::optional<MapSnapshot> snapshot = takeSnapshot();
+  return snapshot ? std::move(snapshot->map) : nullptr;
 }
 
 void MapUpdateWorker::retire(std::shared_ptr<const VoxelMap> snapshot) {
@@ -377,6 +394,7 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
   std::size_t pending_points = 0;
   const auto fold = [&] {
     timed(totals_.tile_fold_ms, totals_.tile_fold_cpu_ms, [&] { addTiles(target, pending); });
+    for (const PendingTile& tile : pending) landed(tile.id);
     pending.clear();
     pending_points = 0;
   };
@@ -439,11 +457,69 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
         }
       } catch (const std::exception& e) {  // PcdReadError names the file; a bad id says what a tile name is
         failures.push_back("tile " + id + " skipped: " + e.what());
+        landed(id);
       }
       if (pending_points >= kFoldBatchPoints) fold();
     }
+    // What has arrived is matched on while the rest comes, nearest the vehicle first.
+    if (!left.empty() && Clock::now() - published_ >= std::chrono::duration<double>(kPartialSnapshotPeriod)) {
+      fold();
+      publish(target, true, 0.0, 0, failures);
+    }
   }
   fold();
+}
+
+void MapUpdateWorker::planInFlight(const std::deque<MapChange>& batch) {
+  const auto enter = [this](const std::string& id, double grid_size) {
+    try {
+      in_flight_.emplace(id, tileKeyOfStem(id, grid_size));
+    } catch (const std::invalid_argument&) {
+      // Not a tile name: loading it reports why.
+    }
+  };
+  for (const MapChange& change : batch) {
+    const bool tiles = change.kind == MapChange::Kind::kTiles;
+    if (!tiles && change.kind != MapChange::Kind::kTileFiles) {  // a whole map
+      in_flight_.clear();
+      continue;
+    }
+    if ((tiles ? change.reset : change.files.reset) || change.grid_size != in_flight_size_) in_flight_.clear();
+    in_flight_size_ = change.grid_size;
+    for (const std::string& id : tiles ? change.removed : change.files.removed) in_flight_.erase(id);
+    if (tiles)
+      for (const TileCloud& tile : change.added) enter(tile.id, change.grid_size);
+    else
+      for (const std::string& id : change.files.added) enter(id, change.grid_size);
+  }
+}
+
+void MapUpdateWorker::landed(const std::string& id) { in_flight_.erase(id); }
+
+void MapUpdateWorker::publish(const NdtTarget& target, bool partial, double update_ms, std::size_t changes,
+                              std::vector<std::string>& failures) {
+  MapSnapshot snapshot{target.snapshot(), {in_flight_size_, {}}};
+  snapshot.in_flight.keys.reserve(in_flight_.size());
+  for (const auto& tile : in_flight_) snapshot.in_flight.keys.push_back(tile.second);
+  const VoxelMap& map = *snapshot.map;
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (partial) {
+    ++stats_.partial_snapshots;
+  } else {
+    ++stats_.generation;
+    stats_.update_ms = update_ms;
+    stats_.changes = changes;
+  }
+  stats_.tiles = tiles_.size();
+  stats_.window = window_;
+  stats_.tile_aligned = aligned_;
+  stats_.voxels = map.gaussianCount();
+  stats_.points = map.pointCount();
+  stats_.map_bytes = map.bytes();
+  errors_.insert(errors_.end(), failures.begin(), failures.end());
+  failures.clear();
+  ready_ = std::move(snapshot);
+  published_ = Clock::now();
 }
 
 void MapUpdateWorker::readAhead() {
@@ -561,36 +637,24 @@ void MapUpdateWorker::run() {
     // Old snapshots the scan thread handed back are freed here (when no other holder is left).
     retired.clear();
     cache_.setBudget(budget);
-    std::shared_ptr<const VoxelMap> snapshot;
-    std::vector<std::string> failures;
-    double ms = 0.0;
     if (!batch.empty()) {
-      const auto start = std::chrono::steady_clock::now();
+      const auto start = Clock::now();
+      planInFlight(batch);
+      std::vector<std::string> failures;
       for (const MapChange& change : batch) {
         try {
           apply(target, change, failures);
         } catch (const std::exception& e) {
           failures.emplace_back(e.what());
         }
+        // Whatever of the change has not landed by now will not come with it (a failure says why).
+        for (const TileCloud& tile : change.added) landed(tile.id);
+        for (const std::string& id : change.files.added) landed(id);
       }
-      snapshot = target.snapshot();
-      ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-      std::atomic_store(&ready_, snapshot);
+      publish(target, false, msSince(start), batch.size(), failures);
     }
 
     lock.lock();
-    if (snapshot) {
-      ++stats_.generation;
-      stats_.update_ms = ms;
-      stats_.changes = batch.size();
-      stats_.tiles = tiles_.size();
-      stats_.window = window_;
-      stats_.tile_aligned = aligned_;
-      stats_.voxels = snapshot->gaussianCount();
-      stats_.points = snapshot->pointCount();
-      stats_.map_bytes = snapshot->bytes();
-      errors_.insert(errors_.end(), failures.begin(), failures.end());
-    }
     working_ = false;
     releasing_ = false;
     prefetching_ = !prefetch_.empty();

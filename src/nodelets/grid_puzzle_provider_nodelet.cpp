@@ -137,7 +137,9 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
   void onLocalizerStatus(const NdtStatus::ConstPtr& msg) {
     {
       std::lock_guard<std::mutex> lock(input_mutex_);
-      if (msg->lost && msg->search_radius > 0.0) {
+      // The window grows for a search only once its tiles have all arrived: a growth queued behind a window still
+      // loading would only slow what the robot needs now.
+      if (msg->lost && msg->search_radius > 0.0 && msg->tiles_in_flight == 0) {
         search_ = LostSearchRegion{msg->search_x, msg->search_y, msg->search_radius, msg->header.stamp.toSec()};
         tracking_again_ = false;
       } else if (msg->match_accepted) {

@@ -181,6 +181,7 @@ LocalizerRosParams loadLocalizerParams(const ros::NodeHandle& pnh, const std::st
   load("imu/use_gyro", c.imu.use_gyro);
   load("imu/max_gap", c.imu.max_gap);
   load("time_jump_back", c.time_jump_back);
+  load("map_wait_half_side", c.map_wait_half_side);
   loadFusion(pnh, load, c.fusion, p);
 
   pnh.getParam("map_source", p.map_source);

@@ -59,12 +59,16 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       NODELET_FATAL("%s: %s", getName().c_str(), e.what());
       throw;
     }
-    if (params_.initial_pose) localizer_->setDefaultInitialPose(*params_.initial_pose);
+    if (params_.initial_pose) {
+      localizer_->setDefaultInitialPose(*params_.initial_pose);
+      localizer_->map().setFocus(params_.initial_pose->translation().head<2>());
+    }
     // Consumed: a respawned process must not start again from the launch's pose (the vehicle has moved on);
     // it waits for initialpose or searches around the pose it saved in ~last_pose (global_localization/*).
     if (params_.initial_pose) pnh.deleteParam("initial_pose");
     if (params_.last_pose && !params_.initial_pose) {
       hint_ = Hint{params_.last_pose->translation().head<2>(), 0.0};  // an initialpose_hint message replaces it
+      localizer_->map().setFocus(hint_->xy);
       if (params_.global_localization.auto_start_timeout > 0.0)
         NODELET_INFO(
             "no pose yet: resumes searching around (%.2f, %.2f), the last pose saved in ~last_pose, %.1f s "
@@ -153,6 +157,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       return;
     }
     localizer_->setInitialPose(pose);
+    localizer_->map().setFocus(pose.translation().head<2>());  // its tiles first
     NODELET_INFO("initial pose set to (%.2f, %.2f, %.2f)", pose.translation().x(), pose.translation().y(),
                  pose.translation().z());
   }
@@ -240,7 +245,14 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       out = localizer_->processScan(msg->header.stamp.toSec(), scan, *base_T_sensor, times ? &*times : nullptr);
       reportState(out.state);
     }
-    if (out.state != LocalizerState::kTracking) return;
+    if (out.tiles_awaited > 0)
+      NODELET_INFO_THROTTLE(2.0,
+                            "waiting for the map: %zu tiles of the window still loading, %zu of them near the pose",
+                            out.tiles_in_flight, out.tiles_awaited);
+    if (out.state != LocalizerState::kTracking) {
+      publish(out, msg->header);  // the status says why it waits; nothing else goes out
+      return;
+    }
     // Tiles still loading go nearest the pose the next scans will be matched around first.
     localizer_->map().setFocus(out.prediction.translation().head<2>());
     if (out.recovered)
@@ -284,6 +296,12 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     if (hinted) last_hint_search_ = t;
     const std::optional<SearchRegion> region = requestedRegion(req);
     if (!region) return false;  // no map yet
+    // On a window still arriving the search would call the place ambiguous, or find a look-alike: it waits.
+    const std::size_t awaited = localizer_->tilesAwaited(region->centre.translation().head<2>(), region->radius);
+    if (awaited > 0) {
+      NODELET_INFO_THROTTLE(2.0, "global localization waits for %zu tiles of its region still loading", awaited);
+      return false;
+    }
     const Localizer::StartSearch start = localizer_->searchForStart(*region);
     const GlobalLocalizationResult& r = start.search;
     if (r.found) {
@@ -319,6 +337,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       return;
     }
     hint_ = Hint{Eigen::Vector2d(x, y), 2.0 * region.radius};
+    localizer_->map().setFocus(hint_->xy);
     if (!localizer_->lastAcceptedPose()) {
       hint_due_ = true;  // searched at the next scan that waits for a pose
       last_hint_search_.reset();

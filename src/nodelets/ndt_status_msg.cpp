@@ -6,6 +6,9 @@ NdtStatus toStatusMsg(const LocalizerOutput& out, const std_msgs::Header& header
                       const std::string& map_source) {
   NdtStatus msg;
   msg.header = header;
+  msg.state = toString(out.state);
+  msg.tiles_in_flight = static_cast<std::uint32_t>(out.tiles_in_flight);
+  msg.tiles_awaited = static_cast<std::uint32_t>(out.tiles_awaited);
   msg.converged = out.ndt.converged;
   msg.match_accepted = out.match_accepted;
   msg.iterations = out.ndt.iterations;

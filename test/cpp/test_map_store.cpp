@@ -9,13 +9,18 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <limits>
 #include <map>
+#include <optional>
 #include <random>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
+#include "grid_puzzle_localization/localizer.hpp"
 #include "grid_puzzle_localization/map_store/map_store.hpp"
 #include "grid_puzzle_localization/map_update_worker.hpp"
 #include "grid_puzzle_localization/provider/tile_directory.hpp"
@@ -560,6 +565,129 @@ TEST_F(MapWorkerOverHttp, AfterAnOutageEachChangeRetriesOneFetchBatchOfTheFailed
   EXPECT_EQ(worker.takeErrors(), std::vector<std::string>());
   EXPECT_EQ(worker.stats().tiles, 10 + batch);
   EXPECT_EQ(worker.stats().map_store_fetched, 10 + batch);
+}
+
+// ---- a window from a slow store arrives nearest the vehicle first and is matched on as it arrives
+
+namespace {
+
+// nginx serving the world's index at once and its tiles at most `per_second` a second, all connections together (a
+// slow store: nginx's limit_req delays the requests over the rate, none is refused).
+std::unique_ptr<NginxServer> throttledServer(const ServedWorld& world, int per_second) {
+  const std::string map = world.root + "/map/";
+  auto server = std::make_unique<NginxServer>(
+      world.root,
+      "    location /throttled/ { alias " + map + "; }\n    location ~ ^/throttled/(.+\\.pcd)$ { alias " + map +
+          "$1; limit_req zone=tiles burst=100000; }\n",
+      "  limit_req_zone $server_port zone=tiles:1m rate=" + std::to_string(per_second) + "r/s;");
+  server->start();
+  return server;
+}
+
+}  // namespace
+
+TEST_F(MapWorkerOverHttp, ASlowWindowIsPublishedAsItArrivesNearestTheFocusFirstWithWhatIsStillInFlight) {
+  const auto slow = throttledServer(world_, 300);  // 600 tiles: 2 s
+  gpl::MapUpdateWorker worker{gpl::VoxelMapParams()};
+  worker.setMapStoreConfig(config_);
+  const Eigen::Vector2d focus(12.0, -7.0);
+  worker.setFocus(focus);
+  worker.submit(fileChange(slow->url("/throttled"), world_.revision(), true, world_.ids));
+  std::optional<gpl::MapSnapshot> partial, latest;
+  while (worker.busy()) {
+    if (std::optional<gpl::MapSnapshot> s = worker.takeSnapshot()) {
+      if (!partial && !s->in_flight.keys.empty()) partial = s;
+      latest = std::move(s);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  worker.waitIdle();
+  if (std::optional<gpl::MapSnapshot> s = worker.takeSnapshot()) latest = std::move(s);
+  EXPECT_EQ(worker.takeErrors(), std::vector<std::string>());
+  ASSERT_TRUE(partial) << "no snapshot while the window was loading";
+  EXPECT_GE(worker.stats().partial_snapshots, 1u);
+
+  // The partial map is exactly the tiles not in flight, read from disk, and they are the ones nearest the focus.
+  std::set<std::pair<std::int64_t, std::int64_t>> flying;
+  for (const gpl::TileKey& k : partial->in_flight.keys) flying.insert({k.i, k.j});
+  std::vector<std::string> held;
+  double farthest_held = 0.0, nearest_flying = std::numeric_limits<double>::infinity();
+  for (const std::string& id : world_.ids) {
+    const gpl::TileKey k = gpl::tileKeyOfStem(id, 2.0);
+    const double d = (Eigen::Vector2d(2.0 * k.i + 1.0, 2.0 * k.j + 1.0) - focus).norm();
+    if (flying.count({k.i, k.j})) {
+      nearest_flying = std::min(nearest_flying, d);
+    } else {
+      held.push_back(id);
+      farthest_held = std::max(farthest_held, d);
+    }
+  }
+  ASSERT_FALSE(held.empty());
+  EXPECT_EQ(held.size() + flying.size(), world_.ids.size());
+  EXPECT_LE(farthest_held, nearest_flying);
+  EXPECT_EQ(partial->in_flight.within(focus, 1.0), 0u);
+  gpl::MapUpdateWorker local{gpl::VoxelMapParams()};
+  local.submit(fileChange(world_.root + "/map", "r", true, held));
+  local.waitIdle();
+  expectSameVoxels(*partial->map, *local.takeReady());
+
+  // Loaded: nothing in flight, the whole window.
+  ASSERT_TRUE(latest);
+  EXPECT_TRUE(latest->in_flight.keys.empty());
+  local.submit(fileChange(world_.root + "/map", "r", true, world_.ids));
+  local.waitIdle();
+  expectSameVoxels(*latest->map, *local.takeReady());
+}
+
+TEST_F(MapWorkerOverHttp, AStartOnASlowStoreWaitsForTheTilesAroundItAndIsNotLostMeanwhile) {
+  const auto slow = throttledServer(world_, 300);
+  gpl::LocalizerConfig c;
+  c.preprocess.voxel_size = 0.4;
+  c.preprocess.max_range = 30.0;
+  c.lost.background_search = false;
+  gpl::Localizer loc(c);
+  loc.map().setMapStoreConfig(config_);
+  const Eigen::Isometry3d standing = gpl::test::poseXYYaw(-12.0, 2.0, 0.2);  // the vehicle waits at its start
+  const Eigen::Isometry3d mount = gpl::test::poseXYYaw(0.3, 0.0, 0.05, 1.8);
+  const gpl::PointCloud world = gpl::test::makeWorld();
+  loc.map().setFocus(standing.translation().head<2>());
+  loc.setInitialPose(standing);
+  loc.map().submit(fileChange(slow->url("/throttled"), world_.revision(), true, world_.ids));
+  std::size_t waited_for_tiles = 0, tracked = 0, in_flight_at_first_pose = 0;
+  for (int i = 0; tracked < 10 && i < 2000; ++i) {
+    const gpl::LocalizerOutput out =
+        loc.processScan(0.1 * i, gpl::test::scanFrom(world, standing * mount, 30.0f, 0.01f, i), mount);
+    EXPECT_FALSE(out.lost) << "scan " << i << ": lost on a window still arriving";
+    if (out.state == gpl::LocalizerState::kWaitingForMap) {
+      EXPECT_FALSE(out.publish);
+      if (out.tiles_awaited > 0) ++waited_for_tiles;
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      continue;
+    }
+    ASSERT_EQ(out.state, gpl::LocalizerState::kTracking);
+    if (tracked++ == 0) {
+      in_flight_at_first_pose = out.tiles_in_flight;
+      // Matched once the tiles around the start had arrived, not before.
+      EXPECT_EQ(loc.tilesAwaited(standing.translation().head<2>(), c.map_wait_half_side), 0u);
+    }
+    EXPECT_TRUE(out.match_accepted) << "scan " << i;
+    EXPECT_LT(gpl::test::translationError(out.pose, standing), 0.05) << "scan " << i;
+  }
+  EXPECT_EQ(tracked, 10u);
+  EXPECT_GT(waited_for_tiles, 0u) << "the start never waited for tiles around it";
+  EXPECT_GT(in_flight_at_first_pose, 0u) << "the start waited for the whole window, not the tiles around it";
+
+  // Once the whole window is there, a scan that fits nowhere is lost, and says it waited for nothing.
+  loc.map().waitIdle();
+  gpl::PointCloud noise;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(-20.0f, 20.0f);
+  for (int k = 0; k < 3000; ++k) noise.push_back(gpl::Point(u(rng), u(rng), 0.1f * u(rng)));
+  gpl::LocalizerOutput out;
+  for (int k = 0; k < 3; ++k) out = loc.processScan(300.0 + 0.1 * k, noise, mount);
+  EXPECT_TRUE(out.lost);
+  EXPECT_EQ(out.tiles_awaited, 0u);
+  EXPECT_EQ(out.tiles_in_flight, 0u);
 }
 
 // ---- the provider's tile references follow a directory given by URL through its polled index

@@ -318,3 +318,15 @@ TEST(NearestFirstTiles, WithoutAFocusKeepsTheChangesOrderAndBadIdsGoLast) {
   EXPECT_EQ(focused.take(2, Eigen::Vector2d(0.0, 0.0)), (std::vector<std::string>{"5.0_5.0", "not-a-tile"}));
   EXPECT_TRUE(focused.empty());
 }
+
+TEST(TilesInFlight, CountsTheTilesThatMeetASquare) {
+  // Tiles of 2 m: (0, 0) spans [0, 2] x [0, 2], (1, 0) spans [2, 4] x [0, 2], (5, 5) spans [10, 12] x [10, 12].
+  const gpl::TilesInFlight in_flight{2.0, {{0, 0}, {1, 0}, {5, 5}}};
+  EXPECT_EQ(in_flight.within(Eigen::Vector2d(1.0, 1.0), 0.5), 1u);
+  EXPECT_EQ(in_flight.within(Eigen::Vector2d(2.0, 1.0), 0.5), 2u);
+  EXPECT_EQ(in_flight.within(Eigen::Vector2d(3.0, 1.0), 1.0), 1u);  // [2, 4]: touches (0, 0) only at x = 2
+  EXPECT_EQ(in_flight.within(Eigen::Vector2d(11.0, 11.0), 0.5), 1u);
+  EXPECT_EQ(in_flight.within(Eigen::Vector2d(6.0, 6.0), 3.0), 0u);
+  EXPECT_EQ(in_flight.within(Eigen::Vector2d(6.0, 6.0), 100.0), 3u);
+  EXPECT_EQ(gpl::TilesInFlight().within(Eigen::Vector2d::Zero(), 100.0), 0u);
+}

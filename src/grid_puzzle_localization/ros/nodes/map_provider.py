@@ -195,7 +195,9 @@ class MapProviderNode:
 
     def _on_localizer_status(self, msg: NdtStatus) -> None:
         with self._pose_ready:
-            if msg.lost and msg.search_radius > 0.0:
+            # The window grows for a search only once its tiles have all arrived: a growth queued behind a window
+            # still loading would only slow what the robot needs now.
+            if msg.lost and msg.search_radius > 0.0 and msg.tiles_in_flight == 0:
                 self._search = SearchRegion(msg.search_x, msg.search_y, msg.search_radius, msg.header.stamp.to_sec())
                 self._tracking_again = False
             elif msg.match_accepted:

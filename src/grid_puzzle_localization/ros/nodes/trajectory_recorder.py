@@ -34,6 +34,8 @@ class TrajectoryRecorder:
             self.status_sub = rospy.Subscriber("status", NdtStatus, self.on_status, queue_size=100)
 
     def on_status(self, msg: NdtStatus) -> None:
+        if msg.state != "tracking":  # a scan that waited for the map or a pose: no match was tried
+            return
         self.scan_times.append(
             (
                 msg.header.stamp.to_sec(),
