@@ -1,10 +1,17 @@
 """A TCP proxy that makes localhost look like a network link: every chunk is delivered a fixed delay after it
-arrived (each way, so a round trip costs twice that) and each direction of the link, all connections together, is
-held to a byte rate.
-For `make bench-map-store`'s drive, in front of nginx; asyncio, one thread, no third-party code.
+arrived (each way, so a round trip costs twice that), each direction of the link, all connections together, may be
+held to a byte rate, and the requests, all connections together, to a request rate (a server that answers at most
+so many tiles a second).
+For `make bench-map-store`'s drives, in front of nginx; asyncio, one thread, no third-party code.
 
     proxy = DelayProxy(upstream_port, one_way_delay_s=0.025, rate_bytes_s=10e6)
+    proxy = DelayProxy(upstream_port, one_way_delay_s=0.05, rate_requests_s=50.0)  # 100 ms a request, 50 a second
     proxy.start()  # serves on proxy.port until proxy.stop()
+
+The request rate counts HTTP request heads (each ends in an empty line) in what the clients send, so it holds for
+requests without a body (GET, HEAD), over kept-alive connections as over a connection per request. Request k is
+passed on to the server at its slot, s_k = max(arrival + one-way delay, s_(k-1) + 1 / rate), and its answer comes
+back a one-way delay later: answers start at most `rate` a second, and no sooner than a round trip after the request.
 """
 
 from __future__ import annotations
@@ -14,12 +21,22 @@ import socket
 import threading
 import time
 
+HEAD_END = b"\r\n\r\n"  # the empty line after an HTTP request's header fields
+
 
 class DelayProxy:
-    def __init__(self, upstream_port: int, one_way_delay_s: float, rate_bytes_s: float) -> None:
+    def __init__(
+        self,
+        upstream_port: int,
+        one_way_delay_s: float,
+        rate_bytes_s: float | None = None,
+        rate_requests_s: float | None = None,
+    ) -> None:
         self.upstream_port = upstream_port
         self.delay = one_way_delay_s
-        self.rate = rate_bytes_s
+        self.rate = rate_bytes_s  # None: no byte limit
+        self.request_rate = rate_requests_s  # None: no request limit
+        self.requests = 0  # request heads seen (all connections)
         with socket.socket() as s:
             s.bind(("127.0.0.1", 0))
             self.port = s.getsockname()[1]
@@ -27,6 +44,7 @@ class DelayProxy:
         self._thread = threading.Thread(target=self._loop.run_forever, name="delay_proxy", daemon=True)
         self._server: asyncio.base_events.Server | None = None
         self._link_free_at = {"up": 0.0, "down": 0.0}  # when each direction has sent what it was given (monotonic)
+        self._last_slot = -float("inf")  # when the last request was passed on (monotonic)
 
     def start(self) -> None:
         self._thread.start()
@@ -34,10 +52,22 @@ class DelayProxy:
         self._server = future.result(timeout=5)
 
     def stop(self) -> None:
-        if self._server is not None:
-            self._loop.call_soon_threadsafe(self._server.close)
+        """Closes the listening socket and every connection, and ends the thread."""
+        if not self._thread.is_alive():
+            return
+
+        async def shut_down() -> None:
+            if self._server is not None:
+                self._server.close()
+            tasks = [t for t in asyncio.all_tasks() if t is not asyncio.current_task()]
+            for task in tasks:
+                task.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+
+        asyncio.run_coroutine_threadsafe(shut_down(), self._loop).result(timeout=5)
         self._loop.call_soon_threadsafe(self._loop.stop)
         self._thread.join(timeout=5)
+        self._loop.close()
 
     async def _serve(self, client_reader: asyncio.StreamReader, client_writer: asyncio.StreamWriter) -> None:
         try:
@@ -49,29 +79,47 @@ class DelayProxy:
         answers = self._pipe(upstream_reader, client_writer, "down")
         await asyncio.gather(requests, answers, return_exceptions=True)
 
+    def _request_slot(self, arrived: float, heads: int) -> float:
+        """When the last of ``heads`` requests that arrived at ``arrived`` may go on to the server (-inf: now)."""
+        if self.request_rate is None or heads == 0:
+            return -float("inf")
+        for _ in range(heads):
+            self._last_slot = max(arrived + self.delay, self._last_slot + 1.0 / self.request_rate)
+        return self._last_slot
+
     async def _pipe(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter, direction: str) -> None:
-        """Copies reader to writer: each chunk leaves `delay` after it came, and no sooner than the rate of the
-        link's `direction` allows (shared by every connection: one event loop thread, so no lock)."""
+        """Copies reader to writer: each chunk leaves `delay` after it came, no sooner than the byte rate of the
+        link's `direction` allows, and (up) not before the slot of the last request it completes (the link and the
+        slots are shared by every connection: one event loop thread, so no lock)."""
         queue: asyncio.Queue = asyncio.Queue()
 
         async def deliver() -> None:
             while True:
-                arrived, chunk = await queue.get()
+                arrived, not_before, chunk = await queue.get()
                 if chunk is None:
                     break
-                free_at = max(self._link_free_at[direction], arrived) + len(chunk) / self.rate
-                self._link_free_at[direction] = free_at
-                wait = max(free_at, arrived + self.delay) - time.monotonic()
+                free_at = self._link_free_at[direction]
+                if self.rate is not None:
+                    free_at = max(free_at, arrived) + len(chunk) / self.rate
+                    self._link_free_at[direction] = free_at
+                wait = max(free_at, arrived + self.delay, not_before) - time.monotonic()
                 if wait > 0:
                     await asyncio.sleep(wait)
                 writer.write(chunk)
                 await writer.drain()
 
         sender = asyncio.ensure_future(deliver())
+        tail = b""  # the end of the previous chunk: a head's empty line may straddle two chunks
         try:
             while chunk := await reader.read(65536):
-                queue.put_nowait((time.monotonic(), chunk))
+                arrived = time.monotonic()
+                heads = 0
+                if direction == "up":
+                    heads = (tail + chunk).count(HEAD_END)
+                    tail = (tail + chunk)[-(len(HEAD_END) - 1) :]
+                    self.requests += heads
+                queue.put_nowait((arrived, self._request_slot(arrived, heads), chunk))
         finally:
-            queue.put_nowait((0.0, None))
+            queue.put_nowait((0.0, 0.0, None))
             await asyncio.gather(sender, return_exceptions=True)
             writer.close()
