@@ -40,14 +40,9 @@ run_bench() {
   (cd "$gpl_root" && python3 -m pytest -q test/bench --junitxml="$results/bench/bench.xml") || status=1
 }
 
-# GPL_ROSTEST_EXCLUDE: rostest files (by name, space-separated) that a platform leaves out, each announced.
 run_rostest() {
   export ROS_TEST_RESULTS_DIR="$results/rostest"
   for t in "$gpl_root"/test/rostest/*.test; do
-    if [[ " ${GPL_ROSTEST_EXCLUDE:-} " == *" $(basename "$t") "* ]]; then
-      echo "== rostest $(basename "$t"): NOT RUN on this platform (GPL_ROSTEST_EXCLUDE)"
-      continue
-    fi
     echo "== rostest $(basename "$t")"
     rostest --results-base-dir="$results/rostest" grid_puzzle_localization "$(basename "$t")" || status=1
   done
