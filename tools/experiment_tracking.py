@@ -76,6 +76,10 @@ STRETCHES = {"s1": (0, 251, 30.0), "s2": (252, 560, 35.0)}
 # tight error figure leaves them out, with TURN_MARGIN keyframes (about 6 m) on either side.
 SHARP_TURNS = ((777, 791), (857, 863), (913, 926), (1105, 1110), (1224, 1231))
 TURN_MARGIN = 3
+# The reference itself is bent in the sharp turns (up to 1 m: its map is bent the same way), so no bound holds the
+# localizer to it there; what it must keep is the map fit: at every scan within this distance of where the map holds
+# that scan (map_fit), the `within_map_fit_bound` of a kitti00_far row.
+MAP_FIT_BOUND_M = 0.10
 
 
 def straight(keyframes: np.ndarray, turns=SHARP_TURNS, margin: int = TURN_MARGIN) -> np.ndarray:
@@ -251,6 +255,8 @@ def figures(variant: str, scenario: Path, run: Path, modes: list[str], hog: str 
             row.update(
                 to_map_fit_translation_rmse_m=rounded(to_fit.translation_rmse_m),
                 to_map_fit_translation_max_m=rounded(to_fit.translation_max_m),
+                within_map_fit_bound=to_fit.translation_max_m is not None
+                and to_fit.translation_max_m <= MAP_FIT_BOUND_M,
             )
         first = m.get("start") or {}
         for key in ("first_pose", "first_accepted_pose"):
