@@ -120,6 +120,8 @@ struct MapUpdateStats {
   double tile_fold_ms = 0.0;         ///< wall time folding window tiles into the target [ms]
   double tile_read_cpu_ms = 0.0;     ///< CPU time of the worker thread reading them [ms] (its share of a core)
   double tile_fold_cpu_ms = 0.0;     ///< CPU time of the worker thread folding them [ms]
+  double worker_cpu_ms = 0.0;        ///< CPU time of the worker thread since it started [ms]: every change, snapshot,
+                                     ///< read-ahead and heap trim (what keeping the map current costs a core)
   std::size_t cache_hits = 0;        ///< entering tiles served by the prefetch cache
   std::size_t cache_bytes = 0;       ///< bytes held by the prefetch cache now
   std::size_t points_outside = 0;    ///< tile-aligned: points not added because their voxel is in another tile

@@ -675,6 +675,7 @@ void MapUpdateWorker::run() {
     stats_.cache_hits = totals_.cache_hits;
     stats_.points_outside = totals_.points_outside;
     stats_.cache_bytes = cache_.bytes();
+    stats_.worker_cpu_ms = threadCpuMs();
     copyStoreStatus();
     if (queue_.empty() && retired_.empty()) idle_.notify_all();
   }

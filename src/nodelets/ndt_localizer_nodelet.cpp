@@ -423,7 +423,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   void publish(const LocalizerOutput& out, const std_msgs::Header& scan_header) {
     std_msgs::Header status_header = scan_header;
     status_header.frame_id = params_.map_frame;
-    NdtStatus status = toStatusMsg(out, status_header, localizer_->map().stats().update_ms, params_.map_source);
+    NdtStatus status = toStatusMsg(out, status_header, localizer_->map().stats(), params_.map_source);
     status.scans_dropped = scan_slot_.dropped();
     status.window_states = static_cast<std::uint32_t>(localizer_->fusion().states());
     if (status.scans_dropped > warned_drops_) {

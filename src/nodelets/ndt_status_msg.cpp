@@ -2,7 +2,7 @@
 
 namespace grid_puzzle_localization {
 
-NdtStatus toStatusMsg(const LocalizerOutput& out, const std_msgs::Header& header, double target_update_ms,
+NdtStatus toStatusMsg(const LocalizerOutput& out, const std_msgs::Header& header, const MapUpdateStats& map,
                       const std::string& map_source) {
   NdtStatus msg;
   msg.header = header;
@@ -18,7 +18,8 @@ NdtStatus toStatusMsg(const LocalizerOutput& out, const std_msgs::Header& header
   msg.inlier_fraction = out.ndt.inlier_fraction;
   msg.align_time_ms = out.align_ms;
   msg.scan_time_ms = out.scan_ms;
-  msg.target_update_time_ms = target_update_ms;
+  msg.target_update_time_ms = map.update_ms;
+  msg.map_worker_cpu_s = 1e-3 * map.worker_cpu_ms;
   msg.target_voxels = out.target_voxels;
   msg.target_points = out.target_points;
   msg.source_points = static_cast<std::uint32_t>(out.ndt.source_points);

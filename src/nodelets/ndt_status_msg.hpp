@@ -8,9 +8,9 @@
 
 namespace grid_puzzle_localization {
 
-/// The diagnostics of one tracked scan; `target_update_ms` is the last background target update [ms] and
-/// `map_source` the ~map_source parameter (cloud | tiles | pcd).
-NdtStatus toStatusMsg(const LocalizerOutput& out, const std_msgs::Header& header, double target_update_ms,
+/// The diagnostics of one scan; `map` what the map worker has done (its last update, its CPU time) and `map_source`
+/// the ~map_source parameter (cloud | tiles | pcd).
+NdtStatus toStatusMsg(const LocalizerOutput& out, const std_msgs::Header& header, const MapUpdateStats& map,
                       const std::string& map_source);
 
 }  // namespace grid_puzzle_localization

@@ -305,3 +305,15 @@ TEST(TileCache, EvictsTheOldestBeyondItsBudget) {
   EXPECT_EQ(cache.bytes(), b);
   EXPECT_FALSE(cache.take("b"));
 }
+
+TEST(TileFiles, TheWorkersCpuTimeCoversItsReadsAndFolds) {
+  TiledWorld w(2.0);
+  gpl::MapUpdateWorker worker{gpl::VoxelMapParams()};
+  EXPECT_EQ(worker.stats().worker_cpu_ms, 0.0);
+  worker.submit(change(w.dir.path, true, w.ids, {}, w.s));
+  worker.waitIdle();
+  const gpl::MapUpdateStats stats = worker.stats();
+  EXPECT_GT(stats.tile_read_cpu_ms, 0.0);
+  // The thread's whole CPU time: its reads and folds, and the snapshot and bookkeeping around them.
+  EXPECT_GE(stats.worker_cpu_ms, stats.tile_read_cpu_ms + stats.tile_fold_cpu_ms);
+}
