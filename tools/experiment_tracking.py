@@ -6,7 +6,8 @@ $GPL_SHARED_DATA): real Velodyne HDL-64E scans of a car, about 2 m apart, with O
 (decimetre-level: a reference, not SLAM output). Its two stretches (stretches.txt: lines 0-251 and 252-560 of the
 pose and time files) are each imported with `gpm import` (the map from every 3rd scan, the others played), and
 run in six variants per stretch ``s1`` and ``s2``:
-- ``kitti_s1``: as recorded, started at the first reference pose;
+- ``kitti_s1``: as recorded, started at the first reference pose, each mode run 3 times (interleaved) for the
+  medians of its CPU and memory;
 - ``kitti_s1_drop20_gap8``: 20 % of the played scans dropped at random and 8 s cut in the middle of the drive;
 - ``kitti_s1_offset20_90``: started 20 m off in a seeded random direction and turned by 90 deg;
 - ``kitti_s1_hint20``: no start pose, a hint 20 m sigma from the start on initialpose_hint;
@@ -25,7 +26,8 @@ nodelet in the localizer's manager, and the rospy provider); ``--modes`` runs on
 variant and mode is printed and written to build/experiment_tracking/results.jsonl: the error of the published
 poses over all played scans (and, on kitti00_far, over the straight parts), the scans with a pose and those more
 than 1 m off, whether the localizer kept track (evaluation/tracking.py), the time to the first pose and its error
-then, and the localizer's per-scan time. ``--cpu-hog`` keeps one core busy for the whole run (a busy loop pinned
+then, the localizer's per-scan time, and each mode's CPU and memory under both protocols with their ratio to the
+global map's (resource_figures; medians of 3 runs for the as-recorded variants, one run otherwise). ``--cpu-hog`` keeps one core busy for the whole run (a busy loop pinned
 to core 1), for the same figures on a loaded 2-core machine.
 """
 
@@ -47,6 +49,9 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 from shared_data import SHARED_REAL_DATA
 
+from grid_puzzle_localization.evaluation.repeats import median_of
+from grid_puzzle_localization.evaluation.resources import PROTOCOLS
+from grid_puzzle_localization.evaluation.summary import BASELINE_MODE
 from grid_puzzle_localization.evaluation.tracking import LOST_DEG, LOST_M, tracking
 from grid_puzzle_localization.evaluation.trajectory import Trajectory, make_trajectory, read_tum
 from grid_puzzle_localization.experiment.cpu_hog import CPU_HOG, start_cpu_hog, stop_cpu_hog
@@ -80,6 +85,7 @@ TURN_MARGIN = 3
 # localizer to it there; what it must keep is the map fit: at every scan within this distance of where the map holds
 # that scan (map_fit), the `within_map_fit_bound` of a kitti00_far row.
 MAP_FIT_BOUND_M = 0.10
+REPEATS = 3  # runs of each mode of the as-recorded variants (medians of CPU and memory)
 
 
 def straight(keyframes: np.ndarray, turns=SHARP_TURNS, margin: int = TURN_MARGIN) -> np.ndarray:
@@ -105,7 +111,8 @@ def kitti_variants(name: str, first: int, last: int, gap_at: float) -> dict[str,
     urban = ("--preset", "urban")
     stem = f"kitti_{name}"
     return {
-        stem: Variant(stem, base, urban, KITTI_REFERENCE),
+        # As recorded: each mode run REPEATS times, interleaved, for its CPU and memory (resource_figures).
+        stem: Variant(stem, base, (*urban, "--repeats", str(REPEATS)), KITTI_REFERENCE),
         f"{stem}_drop20_gap8": Variant(f"{stem}_drop20_gap8", thinned, urban, KITTI_REFERENCE),
         f"{stem}_offset20_90": Variant(stem, base, (*urban, "--start-offset", "20", "90"), KITTI_REFERENCE),
         f"{stem}_hint20": Variant(stem, base, (*urban, "--start", "hint", "--hint-sigma", "20"), KITTI_REFERENCE),
@@ -205,6 +212,30 @@ def rounded(value: float | None, digits: int = 3) -> float | None:
     return None if value is None else round(float(value), digits)
 
 
+def resource_figures(summary: dict, mode: str) -> dict:
+    """The mode's CPU [% of one core] and RSS [MiB] under both protocols: the median over the runs (--repeats, run
+    interleaved with the other modes) of each run's mean, and the median over the rounds of the run's ratio to the
+    global map's run of the same round (None for the global map itself)."""
+    resources = summary["modes"][mode]["resources"]
+    spread = summary["repeats"]["spread"].get(mode, {})
+    out: dict = {"repeats": summary["repeats"]["count"]}
+    for protocol in PROTOCOLS:
+        r, s = resources[protocol], spread.get(protocol, {})
+
+        def vs_global(metric: str, s=s) -> float | None:
+            ratios = s.get(metric, {}).get("vs_baseline", {}).get("per_repeat")
+            return None if mode == BASELINE_MODE or not ratios else rounded(median_of(ratios))
+
+        rss = r["rss_bytes"]["mean"]
+        out[protocol] = {
+            "cpu_percent": rounded(r["cpu_percent"]["mean"], 1),
+            "rss_mib": None if rss is None else rounded(rss / 2**20, 1),
+            "cpu_vs_global": vs_global("cpu_percent"),
+            "rss_vs_global": vs_global("rss_bytes"),
+        }
+    return out
+
+
 def figures(variant: str, scenario: Path, run: Path, modes: list[str], hog: str | None, fits: dict) -> list[dict]:
     """One row per mode. ``fits`` keeps map_fit() per scenario (the variants that only start differently share it);
     kitti00_far rows also give the localizer's error against the map fit (``to_map_fit_*``)."""
@@ -267,6 +298,7 @@ def figures(variant: str, scenario: Path, run: Path, modes: list[str], hog: str 
         times = m.get("scan_time_ms") or {}
         row["scan_time_ms"] = {k: rounded(times.get(k), 1) for k in ("median", "p95", "p99", "max")}
         row["slow_scans"] = times.get("slow_scans")
+        row["resources"] = resource_figures(summary, mode)
         rows.append(row)
     return rows
 

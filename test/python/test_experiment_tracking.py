@@ -1,5 +1,6 @@
 """tools/experiment_tracking.py without ROS playback: the straight-part selection on hand-counted keyframes, and the
-kitti00_far variants (what each imports and how each starts), and the map fit on the real HDL-32E pair."""
+kitti00_far variants (what each imports and how each starts), the map fit on the real HDL-32E pair, and the resource
+figures of a run's summary."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import numpy as np
 import pytest
 import reference_check
 
+from grid_puzzle_localization.evaluation.repeats import median_resources, repeat_spread
 from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array, xyz_records
 
 
@@ -126,3 +128,24 @@ def test_the_map_fit_is_how_far_the_map_moves_each_played_scan_from_its_referenc
     truth = np.loadtxt(real_data / "hdl32_pair" / "T_target_source_small_gicp.txt")
     assert fit.poses.t.tolist() == [0.1]
     np.testing.assert_allclose(fit.poses.xyz[0], truth[:3, 3], atol=0.05)
+
+
+def test_resource_figures_are_medians_over_the_runs_and_of_each_rounds_ratio():
+    def run(cpu: float, rss_mib: float) -> dict:
+        metrics = {"cpu_percent": cpu, "rss_bytes": rss_mib * 2**20, "pss_bytes": 0.0, "uss_bytes": 0.0}
+        stats = {m: {"mean": v, "median": v, "p95": v, "max": v} for m, v in metrics.items()}
+        return {protocol: {"processes": ["p"], **stats} for protocol in ("paper", "total")}
+
+    per_repeat = {
+        "global": [run(50.0, 100.0), run(60.0, 100.0), run(40.0, 100.0)],
+        "grid_puzzle": [run(45.0, 70.0), run(48.0, 60.0), run(44.0, 90.0)],
+    }
+    summary = {
+        "modes": {mode: {"resources": median_resources(runs)} for mode, runs in per_repeat.items()},
+        "repeats": {"count": 3, "spread": repeat_spread(per_repeat, "global")},
+    }
+    grid = et.resource_figures(summary, "grid_puzzle")
+    assert grid["repeats"] == 3
+    # Medians of the runs' means: 45 % and 70 MiB; of the rounds' ratios 0.9, 0.8, 1.1 and 0.7, 0.6, 0.9.
+    assert grid["paper"] == {"cpu_percent": 45.0, "rss_mib": 70.0, "cpu_vs_global": 0.9, "rss_vs_global": 0.7}
+    assert et.resource_figures(summary, "global")["total"]["cpu_vs_global"] is None
