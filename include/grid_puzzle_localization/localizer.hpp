@@ -130,6 +130,12 @@ struct LocalizerConfig {
 /// target's voxel means).
 GlobalLocalizationConfig globalSearchConfig(const LocalizerConfig& config);
 
+/// The judged answer of an automatic start's search (Localizer::searchForStart).
+struct StartSearch {
+  GlobalLocalizationResult search;  ///< found: the start was taken
+  bool held = false;                ///< the search answered and its answer is held for the next one to confirm
+};
+
 enum class LocalizerState { kWaitingForMap, kWaitingForInitialPose, kTracking };
 const char* toString(LocalizerState state);
 
@@ -170,6 +176,9 @@ struct LocalizerOutput {
   bool global_search = false;
   std::string global_search_reason;  ///< why its answer was refused (empty when taken or not run)
   bool search_started = false;       ///< a background search of this scan was started (lost.background_search)
+  /// A start search beside the scan thread (startSearchForStart) finished before this scan: its answer, judged as
+  /// searchForStart judges it (found: the track starts there, and this scan is matched from it).
+  std::optional<StartSearch> start_search;
   NdtResult ndt;  ///< the match; when none was accepted, the last one tried (status INVALID_INPUT: none was tried)
   PreprocessReport preprocess;
   double align_ms = 0.0;  ///< NDT only
@@ -230,11 +239,18 @@ class Localizer {
   /// with is held for the next searches (the last four) and reported not found, with the reason, and `held`. One
   /// search alone is never taken: on a large map the search can miss the true place, and another place may then fit
   /// the scan well enough to pass every gate. Searches on every core (nothing is tracked meanwhile). Scan thread only.
-  struct StartSearch {
-    GlobalLocalizationResult search;  ///< found: the start was taken
-    bool held = false;                ///< the search answered and its answer is held for the next one to confirm
-  };
+  using StartSearch = grid_puzzle_localization::StartSearch;
   StartSearch searchForStart(const SearchRegion& region);
+  /// searchForStart beside the scan thread (lost.background_search): the search of `region` on the last scan runs on
+  /// a thread of its own, on every core but niced below the scan thread, and returns at once; the scans go on
+  /// meanwhile, each reported waiting for a pose (not queued behind the search), and the first scan after it
+  /// finishes judges its answer (LocalizerOutput::start_search). The search's work budget
+  /// (GlobalLocalizationConfig::max_poses) bounds its time. Without background_search it is searchForStart. Returns
+  /// the judged answer when it searched within the call, nullopt when the search runs beside (or one already runs: it
+  /// is not started twice). Scan thread only.
+  std::optional<StartSearch> startSearchForStart(const SearchRegion& region);
+  /// A search started by this localizer (a start's, a recovery's) is still running. Scan thread only.
+  bool searching() const { return search_.has_value(); }
   /// An automatic start's answer is held, waiting for a search of a later scan to agree with it.
   bool startAwaitsConfirmation() const { return !start_candidates_.empty(); }
   /// The x y z extent of the current target's Gaussians (voxel means); empty without a map.
@@ -278,6 +294,12 @@ class Localizer {
   /// Starts the search of `region` for the scan at `stamp` (source_) on its own thread; its pose is taken up within
   /// `reach` (anywhere by default), as a restart of the track when `restarts_track`.
   void startBackgroundSearch(double stamp, const SearchRegion& region, bool restarts_track, const Reach& reach);
+  /// Releases the search's structures when they were built for a target swapped out while the search ran.
+  void releaseStaleSearchMap();
+  /// Judges a start search's answer `r` for the scan at `stamp` against the held ones (searchForStart).
+  StartSearch judgeStart(GlobalLocalizationResult r, double stamp);
+  /// The finished start search beside the scan thread, judged; nullopt while it runs or when none was started.
+  std::optional<StartSearch> takeStartSearch();
   /// Takes up a finished background search: its pose becomes the match of the scan it searched when the track has
   /// not moved since it started and the pose lies within its reach. Returns the time [s] from the last accepted
   /// match to this scan when it was taken up.
@@ -336,6 +358,7 @@ class Localizer {
     double stamp = 0.0;               // of the scan searched
     std::uint64_t track_version = 0;  // when it started: a change since makes its answer stale
     bool restarts_track = false;      // a start's or a gap's search: its pose is a correction, not a motion
+    bool start = false;               // an automatic start's search (startSearchForStart), judged by judgeStart
     Reach reach;                      // where its pose may lie; by default anywhere in a wrong start's square
   };
   std::optional<BackgroundSearch> search_;

@@ -7,6 +7,8 @@
 #include <stdexcept>
 #include <utility>
 
+#include "thread_priority.hpp"
+
 namespace grid_puzzle_localization {
 namespace {
 
@@ -59,6 +61,8 @@ constexpr int kCarriedMatchIterations = 6;
 // An automatic start holds the answers of this many searches that no later one agreed with yet (the oldest goes):
 // on a loaded machine a search takes over a second, and a right answer followed by a wrong one still finds its match.
 constexpr std::size_t kHeldStartAnswers = 4;
+// A start search beside the scan thread runs this much nicer than it (its OpenMP team too).
+constexpr int kStartSearchNiceIncrement = 10;
 
 NdtConfig carriedMatchConfig(const NdtConfig& config) {
   NdtConfig c = config;
@@ -233,12 +237,9 @@ std::optional<double> Localizer::takeFinishedSearch(double stamp, LocalizerOutpu
   BackgroundSearch job = std::move(*search_);
   search_.reset();
   const GlobalLocalizationResult g = job.result.get();
-  if (global_target_ && global_target_ != target_) {
-    // Built for a target swapped out while the search ran: released now, as at the swap.
-    global_.clearMap();
-    worker_.retire(std::move(global_target_));
-  }
-  if (job.track_version != track_version_ || !predictor_.initialized()) return std::nullopt;  // the track moved on
+  releaseStaleSearchMap();
+  // The track moved on (a start search's answer is a start's: stale once tracking).
+  if (job.start || job.track_version != track_version_ || !predictor_.initialized()) return std::nullopt;
   out.global_search = true;
   out.global_search_reason = g.reason;
   if (!g.found || !job.reach.holds(g.map_T_base)) return std::nullopt;
@@ -251,6 +252,14 @@ std::optional<double> Localizer::takeFinishedSearch(double stamp, LocalizerOutpu
   }
   noteAccepted(g.refinement);
   return lost_for;
+}
+
+void Localizer::releaseStaleSearchMap() {
+  if (global_target_ && global_target_ != target_) {
+    // Built for a target swapped out while the search ran: released now, as at the swap.
+    global_.clearMap();
+    worker_.retire(std::move(global_target_));
+  }
 }
 
 void Localizer::noteAccepted(const NdtResult& match) {
@@ -289,8 +298,45 @@ GlobalLocalizationResult Localizer::globalLocalize(const SearchRegion& region) {
 Localizer::StartSearch Localizer::searchForStart(const SearchRegion& region) {
   // Nothing is tracked while a start is searched for: the search takes every core.
   GlobalLocalizationResult r = searchLastScan(searchRequest(region, 0));
+  return judgeStart(std::move(r), source_stamp_.value_or(0.0));
+}
+
+std::optional<StartSearch> Localizer::startSearchForStart(const SearchRegion& region) {
+  if (!config_.lost.background_search) return searchForStart(region);
+  if (search_) return std::nullopt;
+  if (!target_ || target_->gaussianCount() == 0 || !source_stamp_) {
+    StartSearch none;
+    none.search.reason = source_stamp_ ? "no map yet" : "no scan yet";
+    return none;
+  }
+  BackgroundSearch job;
+  job.stamp = *source_stamp_;
+  job.track_version = track_version_;
+  job.start = true;
+  // Every core, as searchForStart, but below the scan thread: the scans that come meanwhile are not held back by it.
+  job.result =
+      std::async(std::launch::async, [this, target = target_, source = source_, request = searchRequest(region, 0)] {
+        lowerCallingThreadPriority(kStartSearchNiceIncrement);
+        return runSearch(target, source, request);
+      });
+  search_ = std::move(job);
+  return std::nullopt;
+}
+
+std::optional<StartSearch> Localizer::takeStartSearch() {
+  if (!search_ || !search_->start || search_->result.wait_for(std::chrono::seconds(0)) != std::future_status::ready)
+    return std::nullopt;
+  BackgroundSearch job = std::move(*search_);
+  search_.reset();
+  GlobalLocalizationResult g = job.result.get();
+  releaseStaleSearchMap();
+  if (job.track_version != track_version_ || predictor_.initialized()) return std::nullopt;  // a pose came meanwhile
+  return judgeStart(std::move(g), job.stamp);
+}
+
+StartSearch Localizer::judgeStart(GlobalLocalizationResult r, double stamp) {
   if (!r.found) return {r, false};
-  const StartCandidate answer{r.map_T_base, *source_stamp_};
+  const StartCandidate answer{r.map_T_base, stamp};
   // The latest held answer that this one agrees with (a search between them may have answered elsewhere).
   for (auto earlier = start_candidates_.rbegin(); earlier != start_candidates_.rend(); ++earlier) {
     const SearchRegion reach =
@@ -451,6 +497,9 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   }
   const bool fresh = pending_initial_pose_.has_value();
   if (fresh) startFrom(*pending_initial_pose_, stamp, predictionCovariance(config_.covariance), 0.0);
+  // A start search beside the scan thread that has finished is judged; a confirmed answer starts the track, and this
+  // scan is matched from it.
+  if (!predictor_.initialized()) out.start_search = takeStartSearch();
   if (!predictor_.initialized()) {
     // Kept (not deskewed: no motion is known) for a global search started while waiting.
     preprocessor_.apply(scan, source_, &out.preprocess);

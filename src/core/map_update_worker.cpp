@@ -1,13 +1,9 @@
 #include "grid_puzzle_localization/map_update_worker.hpp"
 
-#include <sys/resource.h>
 #include <sys/stat.h>
-#include <sys/syscall.h>
 #include <time.h>
-#include <unistd.h>
 
 #include <algorithm>
-#include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -20,6 +16,7 @@
 #endif
 
 #include "grid_puzzle_localization/pcd_reader.hpp"
+#include "thread_priority.hpp"
 
 namespace grid_puzzle_localization {
 
@@ -603,13 +600,7 @@ class HeapTrimmer {
 }  // namespace
 
 void MapUpdateWorker::run() {
-#if defined(__linux__)
-  // Best effort: raising one's own niceness needs no privilege; a failure only leaves the thread as it was.
-  const auto tid = static_cast<id_t>(syscall(SYS_gettid));
-  errno = 0;
-  const int nice = getpriority(PRIO_PROCESS, tid);
-  if (errno == 0) static_cast<void>(setpriority(PRIO_PROCESS, tid, std::min(19, nice + kWorkerNiceIncrement)));
-#endif
+  lowerCallingThreadPriority(kWorkerNiceIncrement);
   pinHeapThresholds();
   NdtTarget target(params_);
   std::unique_lock<std::mutex> lock(mutex_);

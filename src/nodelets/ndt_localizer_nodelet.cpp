@@ -239,9 +239,12 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     }
     logFusionWarnings();
     if (out.reset) NODELET_WARN("scan time went backwards (bag loop?): localizer reset");
+    // A start search beside the scan thread finished before this scan (found: this scan was matched from it).
+    if (out.start_search) reportStartSearch(*out.start_search, msg->header.stamp.toSec());
     reportState(out.state);
     if (out.state == LocalizerState::kWaitingForInitialPose && maybeStartGlobalLocalization(msg->header.stamp)) {
-      // The start was found for this scan: the scan is matched from it, and published like the next ones.
+      // The start was found for this scan (a search within the call): the scan is matched from it, and published
+      // like the next ones.
       out = localizer_->processScan(msg->header.stamp.toSec(), scan, *base_T_sensor, times ? &*times : nullptr);
       reportState(out.state);
     }
@@ -276,8 +279,10 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
   // Starts a global search when an initialpose_hint came while no pose is known (again every lost/search_period
   // until one is found), or when no initial pose came within global_localization/auto_start_timeout. An answer is
   // taken once the search of a later scan agrees with it (Localizer::searchForStart): while one is held, the next
-  // scan is searched at once. True when the start was taken.
+  // scan is searched at once. With lost/background_search the search runs beside the scan thread and a later scan
+  // judges it (LocalizerOutput::start_search). True when the start was taken within this call.
   bool maybeStartGlobalLocalization(const ros::Time& stamp) {
+    if (localizer_->searching()) return false;  // one start search at a time
     const double t = stamp.toSec();
     const bool confirming = localizer_->startAwaitsConfirmation();
     const bool hinted =
@@ -302,7 +307,15 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       NODELET_INFO_THROTTLE(2.0, "global localization waits for %zu tiles of its region still loading", awaited);
       return false;
     }
-    const Localizer::StartSearch start = localizer_->searchForStart(*region);
+    const std::optional<StartSearch> start = localizer_->startSearchForStart(*region);
+    if (!start) return false;  // runs beside the scan thread
+    reportStartSearch(*start, t);
+    return start->search.found;
+  }
+
+  // Logs a start search's judged answer for the scan at `t` [s]; a search that found nothing is tried again after
+  // another timeout (at once while an answer is held).
+  void reportStartSearch(const StartSearch& start, double t) {
     const GlobalLocalizationResult& r = start.search;
     if (r.found) {
       logFound(r);
@@ -312,9 +325,8 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
                    r.map_T_base.translation().y(), r.reason.c_str());
     } else {
       NODELET_WARN("global localization failed: %s", r.reason.c_str());
-      global_search_timer_.failed(t);  // try again after another timeout (at once while an answer is held)
+      global_search_timer_.failed(t);
     }
-    return r.found;
   }
 
   void onHint(const geometry_msgs::PoseWithCovarianceStamped::ConstPtr& msg) {

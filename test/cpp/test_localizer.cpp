@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <random>
 #include <set>
@@ -823,6 +825,67 @@ TEST(Localizer, AnAutomaticStartIsTakenWhenTheSearchOfALaterScanAgrees) {
   EXPECT_LT(t::translationError(out.pose, third), 0.05);
   EXPECT_LT(t::rotationError(out.pose, third), 0.005);
   EXPECT_NEAR(out.twist(0), 4.0, 0.3);
+}
+
+// A start search beside the scan thread (lost.background_search): the scans that come while it runs are processed at
+// once, waiting for a pose, in about the time a scan takes with no search running (median within 2x, and 1 ms); its
+// answer is judged by the first scan after it, held alone, and taken when the search of a later scan agrees, that
+// scan then matched from it.
+TEST(Localizer, AStartSearchBesideTheScanThreadHoldsNoScanBackAndIsTakenOnlyWhenConfirmed) {
+  const gpl::PointCloud world = t::makeWorld();
+  gpl::LocalizerConfig config = testConfig();
+  config.lost.background_search = true;
+  gpl::Localizer loc(config);
+  loadMap(loc, world);
+  const Eigen::Isometry3d truth = standingPose();  // the vehicle stands while it starts
+  double stamp = 0.0;
+  int seed = 930;
+  const auto scan = [&](double* ms) {
+    stamp += 0.1;
+    const gpl::PointCloud points = t::scanFrom(world, truth * mount(), 30.0f, 0.01f, seed++);
+    const auto start = std::chrono::steady_clock::now();
+    const gpl::LocalizerOutput out = loc.processScan(stamp, points, mount());
+    *ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    return out;
+  };
+  const auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+  };
+  std::vector<double> alone;
+  for (int k = 0; k < 10; ++k) {
+    double ms = 0.0;
+    ASSERT_EQ(scan(&ms).state, gpl::LocalizerState::kWaitingForInitialPose);
+    alone.push_back(ms);
+  }
+  // Runs the search beside the scans until a scan judges it.
+  const auto searchBeside = [&](std::vector<double>& beside) {
+    EXPECT_FALSE(loc.startSearchForStart(wholeMap(loc)).has_value());
+    EXPECT_TRUE(loc.searching());
+    for (;;) {
+      double ms = 0.0;
+      gpl::LocalizerOutput out = scan(&ms);
+      if (out.start_search) return out;
+      EXPECT_EQ(out.state, gpl::LocalizerState::kWaitingForInitialPose);
+      EXPECT_FALSE(out.publish);
+      beside.push_back(ms);
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+  };
+  std::vector<double> beside;
+  const gpl::LocalizerOutput first = searchBeside(beside);
+  EXPECT_TRUE(first.start_search->held);
+  EXPECT_FALSE(first.start_search->search.found);
+  EXPECT_EQ(first.state, gpl::LocalizerState::kWaitingForInitialPose);
+  EXPECT_FALSE(loc.lastAcceptedPose().has_value());
+  const gpl::LocalizerOutput second = searchBeside(beside);
+  ASSERT_TRUE(second.start_search->search.found) << second.start_search->search.reason;
+  EXPECT_EQ(second.state, gpl::LocalizerState::kTracking);
+  EXPECT_TRUE(second.match_accepted);
+  EXPECT_LT(t::translationError(second.pose, truth), 0.05);
+  EXPECT_LT(t::rotationError(second.pose, truth), 0.005);
+  ASSERT_FALSE(beside.empty()) << "no scan came while the searches ran";
+  EXPECT_LE(median(beside), 2.0 * median(alone) + 1.0) << beside.size() << " scans beside the searches";
 }
 
 // Two answers farther apart than the vehicle can move between their scans are not both right: neither is taken. The
