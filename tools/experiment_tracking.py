@@ -27,8 +27,9 @@ variant and mode is printed and written to build/experiment_tracking/results.jso
 poses over all played scans (and, on kitti00_far, over the straight parts), the scans with a pose and those more
 than 1 m off, whether the localizer kept track (evaluation/tracking.py), the time to the first pose and its error
 then, the localizer's per-scan time, and each mode's CPU and memory under both protocols with their ratio to the
-global map's (resource_figures; medians of 3 runs for the as-recorded variants, one run otherwise). ``--cpu-hog`` keeps one core busy for the whole run (a busy loop pinned
-to core 1), for the same figures on a loaded 2-core machine.
+global map's (resource_figures; medians of 3 runs for the as-recorded variants, one run otherwise). ``--cpu-hog``
+keeps one core busy for the whole run (a busy loop pinned to core 1), for the same figures on a loaded 2-core
+machine.
 """
 
 from __future__ import annotations

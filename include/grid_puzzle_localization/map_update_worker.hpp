@@ -96,6 +96,7 @@ struct TilesInFlight {
 
 /// A snapshot of the target with the tiles of the window it does not hold yet.
 struct MapSnapshot {
+  /// nullptr when only the tiles in flight changed (a change started loading): the map held stays.
   std::shared_ptr<const VoxelMap> map;
   TilesInFlight in_flight;
 };
@@ -163,7 +164,8 @@ class MapUpdateWorker {
   /// The snapshot published since the last call, or nullptr. Thread-safe; the worker holds the lock only briefly. A
   /// caller keeps the previous snapshot until it gets one.
   std::shared_ptr<const VoxelMap> takeReady();
-  /// takeReady() with the tiles of the window that snapshot does not hold yet.
+  /// takeReady() with the tiles of the window that snapshot does not hold yet. A change that starts loading announces
+  /// its tiles at once, before any of them arrives (a snapshot without a map).
   std::optional<MapSnapshot> takeSnapshot();
   /// While a change loads, a snapshot of the tiles that have arrived is published at most this often [s].
   static constexpr double kPartialSnapshotPeriod = 0.25;
@@ -208,6 +210,8 @@ class MapUpdateWorker {
   // The window tiles of `batch` not loaded yet (in_flight_), before it is applied.
   void planInFlight(const std::deque<MapChange>& batch);
   void landed(const std::string& id);  // a tile left in_flight_: folded in, or failed
+  TilesInFlight inFlight() const;      // in_flight_ as published
+  void announceInFlight();             // publishes in_flight_ without a new map; mutex_ not held
   // Publishes the target with the tiles still in flight; `partial` while a change is loading. mutex_ not held.
   void publish(const NdtTarget& target, bool partial, double update_ms, std::size_t changes,
                std::vector<std::string>& failures);

@@ -470,10 +470,11 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   }
   last_stamp_ = stamp;
   out.map_update_pending = worker_.busy();
-  if (std::optional<MapSnapshot> next = worker_.takeSnapshot()) {
+  std::optional<MapSnapshot> next = worker_.takeSnapshot();
+  if (next) in_flight_ = std::move(next->in_flight);
+  if (next && next->map) {
     // The old snapshot may hold the last reference to thousands of voxel buffers: the worker frees them.
     worker_.retire(std::exchange(target_, std::move(next->map)));
-    in_flight_ = std::move(next->in_flight);
     out.map_swapped = true;
     if (global_target_ && !search_) {
       // The search structures of an older target would be rebuilt before the next search anyway, and they hold

@@ -229,6 +229,11 @@ std::string withoutTrailingSlash(std::string url) {
   return url;
 }
 
+// Tiles a map store fetches at once (its parallel requests; before its first fetch, its connections).
+std::size_t fetchRound(const MapStore& store) {
+  return static_cast<std::size_t>(std::max(1, store.status().parallel_requests));
+}
+
 bool isDirectory(const std::string& path) {
   struct stat st;
   return ::stat(path.c_str(), &st) == 0 && S_ISDIR(st.st_mode);
@@ -416,14 +421,23 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
   // One fetch batch (or, from disk, as many tiles) at a time, nearest the newest predicted position first: a change
   // that takes seconds to arrive follows a pose that moves meanwhile.
   NearestFirstTiles left(added, grid_size);
+  // From a map store, a batch is as many tiles as its server delivered in kPartialSnapshotPeriod (at least a round of
+  // its parallel requests, at most kTileFetchBatch), so a slow server's tiles are matched on as they come; the first
+  // batch is one round.
+  std::size_t batch_size = store ? fetchRound(*store) : kTileFetchBatch;
   while (!left.empty()) {
-    const std::vector<std::string> chunk = left.take(kTileFetchBatch, focus());
+    const std::vector<std::string> chunk = left.take(batch_size, focus());
     if (store) {
       std::vector<std::string> batch;
       for (const std::string& id : chunk)
         if (!(aligned_ && cache_.contains(change.dir + "/" + id + ".pcd"))) batch.push_back(id);
       fetched.clear();
+      const auto fetch_start = Clock::now();
       for (FetchedTile& t : store->fetch(batch)) fetched[t.id] = std::move(t);
+      const double seconds = std::chrono::duration<double>(Clock::now() - fetch_start).count();
+      if (!batch.empty() && seconds > 0.0)
+        batch_size = std::clamp(static_cast<std::size_t>(batch.size() / seconds * kPartialSnapshotPeriod),
+                                fetchRound(*store), kTileFetchBatch);
       std::lock_guard<std::mutex> lock(mutex_);
       copyStoreStatus();  // a server that answers again is reported at once, not after the whole change
     }
@@ -493,11 +507,25 @@ void MapUpdateWorker::planInFlight(const std::deque<MapChange>& batch) {
 
 void MapUpdateWorker::landed(const std::string& id) { in_flight_.erase(id); }
 
+TilesInFlight MapUpdateWorker::inFlight() const {
+  TilesInFlight out{in_flight_size_, {}};
+  out.keys.reserve(in_flight_.size());
+  for (const auto& tile : in_flight_) out.keys.push_back(tile.second);
+  return out;
+}
+
+void MapUpdateWorker::announceInFlight() {
+  TilesInFlight in_flight = inFlight();
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (ready_)
+    ready_->in_flight = std::move(in_flight);  // with the map not taken yet
+  else
+    ready_ = MapSnapshot{nullptr, std::move(in_flight)};
+}
+
 void MapUpdateWorker::publish(const NdtTarget& target, bool partial, double update_ms, std::size_t changes,
                               std::vector<std::string>& failures) {
-  MapSnapshot snapshot{target.snapshot(), {in_flight_size_, {}}};
-  snapshot.in_flight.keys.reserve(in_flight_.size());
-  for (const auto& tile : in_flight_) snapshot.in_flight.keys.push_back(tile.second);
+  MapSnapshot snapshot{target.snapshot(), inFlight()};
   const VoxelMap& map = *snapshot.map;
   std::lock_guard<std::mutex> lock(mutex_);
   if (partial) {
@@ -631,6 +659,7 @@ void MapUpdateWorker::run() {
     if (!batch.empty()) {
       const auto start = Clock::now();
       planInFlight(batch);
+      if (!in_flight_.empty()) announceInFlight();  // known as missing before the first of them arrives
       std::vector<std::string> failures;
       for (const MapChange& change : batch) {
         try {

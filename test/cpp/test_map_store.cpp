@@ -593,17 +593,22 @@ TEST_F(MapWorkerOverHttp, ASlowWindowIsPublishedAsItArrivesNearestTheFocusFirstW
   const Eigen::Vector2d focus(12.0, -7.0);
   worker.setFocus(focus);
   worker.submit(fileChange(slow->url("/throttled"), world_.revision(), true, world_.ids));
-  std::optional<gpl::MapSnapshot> partial, latest;
+  // The first snapshot announces the whole window in flight before any tile arrives (no map yet).
+  std::optional<gpl::MapSnapshot> announced, partial, latest;
   while (worker.busy()) {
     if (std::optional<gpl::MapSnapshot> s = worker.takeSnapshot()) {
-      if (!partial && !s->in_flight.keys.empty()) partial = s;
-      latest = std::move(s);
+      if (!announced && !latest) announced = s;
+      if (!partial && s->map && !s->in_flight.keys.empty()) partial = s;
+      if (s->map) latest = std::move(s);
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   worker.waitIdle();
   if (std::optional<gpl::MapSnapshot> s = worker.takeSnapshot()) latest = std::move(s);
   EXPECT_EQ(worker.takeErrors(), std::vector<std::string>());
+  ASSERT_TRUE(announced);
+  EXPECT_EQ(announced->map, nullptr);
+  EXPECT_EQ(announced->in_flight.keys.size(), world_.ids.size());
   ASSERT_TRUE(partial) << "no snapshot while the window was loading";
   EXPECT_GE(worker.stats().partial_snapshots, 1u);
 
