@@ -115,8 +115,8 @@ def test_grid_puzzle_runs_the_provider_nodelet_and_grid_puzzle_rospy_the_papers_
         "localizer": "/localizer_manager",
         "map_provider": "/grid_puzzle_map_provider",
     }
-    # Either way the runner waits for the provider's node (the nodelet's loader, or the rospy node).
-    for mode in ("grid_puzzle", "grid_puzzle_rospy"):
-        assert required_nodes(cfg, mode) == {"/localizer_manager", "/grid_puzzle_map_provider"}
+    # The runner waits for the rospy provider's node; the nodelet has none (it is in the localizer's process).
+    assert required_nodes(cfg, "grid_puzzle") == {"/localizer_manager"}
+    assert required_nodes(cfg, "grid_puzzle_rospy") == {"/localizer_manager", "/grid_puzzle_map_provider"}
     assert required_nodes(cfg, "global") == {"/localizer_manager"}
     assert set(EMPTY_MAP_MODES) == {"global", "grid_puzzle", "grid_puzzle_rospy"}

@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
 """The grid puzzle stack with the provider nodelet (see provider_nodelet_stack.test): the localizer tracks the
 synthetic drive within 5 cm of the ground truth on the tiles the nodelet serves, the window holds exactly the tile
-files inside its bounds, the localizer's target holds only part of the map, and the stack is one nodelet manager
-process (it publishes the tile deltas and the odometry) plus the nodelet loaders, with no rospy provider and no
-relay process."""
+files inside its bounds, the localizer's target holds only part of the map, and the stack is one process,
+`/localizer_manager` (localization_node: it publishes the tile deltas and the odometry), with no `nodelet load`
+process, no rospy provider and no relay process. With ~one_process false (provider_nodelet_stack_loaders.test, the
+manager-and-loader form) the stack is the nodelet manager process plus one `nodelet load` process per nodelet."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import sys
 import xmlrpc.client
 
 import numpy as np
+import psutil
 import rosgraph
 import rospy
 import rostest
@@ -68,19 +70,42 @@ class ProviderNodeletStackTest(replay.DriveReplayTest):
         self.assertEqual(last.tile_dir, self.tile_dir)
         self.assertLess(self.statuses[-1].target_points, self.map_size)
 
-    def test_the_stack_is_one_manager_process_plus_the_loaders(self) -> None:
+    def test_the_stack_is_one_process_or_the_manager_plus_the_loaders(self) -> None:
         master = rosgraph.Master(rospy.get_name())
         publishers, _, _ = master.getSystemState()
         by_topic = dict(publishers)
         self.assertEqual(by_topic["/tile_delta"], [MANAGER])
         self.assertEqual(by_topic["/odom"], [MANAGER])
         self.assertEqual(by_topic["/grid_puzzle_map_provider/status"], [MANAGER])
+        self.assertEqual(by_topic["/ndt_localizer/status"], [MANAGER])
         nodes = {n for _, names in publishers for n in names}
         ours = {n for n in nodes if n != rospy.get_name() and not n.startswith(("/rosout", "/play_"))}
-        self.assertEqual(ours, {MANAGER, "/ndt_localizer", "/grid_puzzle_map_provider"})
-        pids = {n: self.pid_of(n) for n in ours}
-        self.assertEqual(len(set(pids.values())), 3, pids)  # the two nodes are the manager's loaders
         self.assertNotIn("/last_pose_hint", nodes)
+        pids = {n: self.pid_of(n) for n in ours}
+        loaders = self.nodelet_loaders()
+        rss = sum(psutil.Process(pid).memory_info().rss for pid in set(pids.values()) | set(loaders))
+        rospy.loginfo("stack processes %s, nodelet loaders %s, RSS %.1f MiB", pids, loaders, rss / 2**20)
+        if rospy.get_param("~one_process", True):
+            self.assertEqual(ours, {MANAGER})
+            self.assertIn("localization_node", " ".join(psutil.Process(pids[MANAGER]).cmdline()))
+            self.assertEqual(loaders, [])
+        else:
+            self.assertEqual(ours, {MANAGER, "/ndt_localizer", "/grid_puzzle_map_provider"})
+            self.assertEqual(len(set(pids.values())), 3, pids)  # the two nodes are the manager's loaders
+            self.assertEqual(sorted(loaders), sorted([pids["/ndt_localizer"], pids["/grid_puzzle_map_provider"]]))
+
+    @staticmethod
+    def nodelet_loaders() -> list[int]:
+        """Pids of the `nodelet load` processes that rostest started (this test's siblings)."""
+        loaders = []
+        for proc in psutil.Process(os.getppid()).children(recursive=True):
+            try:
+                cmd = proc.cmdline()
+            except psutil.NoSuchProcess:
+                continue
+            if cmd[:1] and os.path.basename(cmd[0]) == "nodelet" and cmd[1:2] == ["load"]:
+                loaders.append(proc.pid)
+        return loaders
 
     @staticmethod
     def pid_of(node: str) -> int:

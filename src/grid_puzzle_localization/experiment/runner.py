@@ -107,8 +107,8 @@ def launch_args(
 
 
 def mode_roles(cfg: ExperimentConfig, mode: str) -> dict[str, str]:
-    """The node whose process plays each role. The provider nodelet runs in the localizer's manager, so in
-    grid_puzzle mode that one process plays both roles."""
+    """The node whose process plays each role. The provider nodelet runs in the localizer's process
+    (localization_node, /localizer_manager), so in grid_puzzle mode that one process plays both roles."""
     roles = {"localizer": cfg.roles.localizer}
     if mode == "grid_puzzle":
         roles["map_provider"] = cfg.roles.localizer
@@ -120,12 +120,10 @@ def mode_roles(cfg: ExperimentConfig, mode: str) -> dict[str, str]:
 
 
 def required_nodes(cfg: ExperimentConfig, mode: str) -> set[str]:
-    """The nodes to wait for before playing: the role processes' and the tile provider's (in grid_puzzle
-    mode, the loader of its nodelet)."""
-    nodes = set(mode_roles(cfg, mode).values())
-    if mode in GRID_PUZZLE_MODES:
-        nodes.add(cfg.roles.map_provider)
-    return nodes
+    """The nodes to wait for before playing: the role processes'. The provider nodelet (grid_puzzle mode) has
+    no node of its own: the localizer's process loads it before the localizer, so the runner's wait for a
+    subscriber of points covers it."""
+    return set(mode_roles(cfg, mode).values())
 
 
 def say(mode: str, text: str) -> None:
