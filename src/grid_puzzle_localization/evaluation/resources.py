@@ -4,7 +4,8 @@
   the localizer plus the map provider in the grid puzzle (and block-map) modes. Each process counts once:
   with the provider nodelet (grid_puzzle mode) that is the localizer's nodelet manager alone; with the
   rospy provider (grid_puzzle_rospy, the paper's setup) the manager plus the provider's process.
-- ``total``: every process of the mode (nodelet managers, nodelet loaders, provider, helpers).
+- ``total``: every process of the mode (the localization process or a nodelet manager with its loaders, provider,
+  helpers).
 
 CPU is in percent of one core; memory in bytes (RSS as psutil reports it, the paper's figure; PSS
 where available, which does not double-count pages shared between the summed processes).

@@ -124,7 +124,7 @@ def headline_section(summary: Mapping) -> list[str]:
         "The paper protocol counts the NDT localizer's nodelet manager alone in global-map mode, and the processes",
         "that localize and serve the tiles in the grid puzzle modes: the same manager alone with the provider",
         "nodelet (grid puzzle), the manager plus the rospy provider in the paper's setup. The total protocol counts",
-        "every process of the stack (nodelet loaders included). CPU is in percent of one core; memory is RSS.",
+        "every process of the stack. CPU is in percent of one core; memory is RSS.",
         "",
     ]
     split = map_memory_split_table(summary)

@@ -308,7 +308,7 @@ def render_report(summary: Mapping) -> str:
         "",
         *resources_table(summary),
         "",
-        "The total protocol counts every process of the mode's launch (nodelet loaders included). PSS splits",
+        "The total protocol counts every process of the mode's launch (with the loaders when it has any). PSS splits",
         "shared pages between the processes that share them, so it does not double-count libraries when",
         "processes are summed.",
         "",
