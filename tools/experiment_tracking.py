@@ -209,6 +209,14 @@ def campus_map(scenario_map: Path, out: Path) -> Path:
     return out
 
 
+def path_length(reference: Trajectory, stamps: np.ndarray) -> float:
+    """[m] driven between the first and the last played scan, along the reference."""
+    if len(stamps) == 0:
+        return 0.0
+    xyz = reference.xyz[(reference.t >= stamps[0]) & (reference.t <= stamps[-1])]
+    return float(np.linalg.norm(np.diff(xyz, axis=0), axis=1).sum())
+
+
 def rounded(value: float | None, digits: int = 3) -> float | None:
     return None if value is None else round(float(value), digits)
 
@@ -299,6 +307,9 @@ def figures(variant: str, scenario: Path, run: Path, modes: list[str], hog: str 
         times = m.get("scan_time_ms") or {}
         row["scan_time_ms"] = {k: rounded(times.get(k), 1) for k in ("median", "p95", "p99", "max")}
         row["slow_scans"] = times.get("slow_scans")
+        # What keeping the map current cost per metre driven: the map worker thread's CPU time over the drive.
+        cpu_s, metres = times.get("map_worker_cpu_s"), path_length(reference, stamps)
+        row["map_worker_cpu_ms_per_m"] = None if cpu_s is None or metres <= 0.0 else rounded(1e3 * cpu_s / metres, 2)
         row["resources"] = resource_figures(summary, mode)
         rows.append(row)
     return rows

@@ -12,6 +12,7 @@ import pytest
 import reference_check
 
 from grid_puzzle_localization.evaluation.repeats import median_resources, repeat_spread
+from grid_puzzle_localization.evaluation.trajectory import make_trajectory
 from grid_puzzle_localization.pcd import read_pcd, write_pcd, xyz_array, xyz_records
 
 
@@ -149,3 +150,11 @@ def test_resource_figures_are_medians_over_the_runs_and_of_each_rounds_ratio():
     # Medians of the runs' means: 45 % and 70 MiB; of the rounds' ratios 0.9, 0.8, 1.1 and 0.7, 0.6, 0.9.
     assert grid["paper"] == {"cpu_percent": 45.0, "rss_mib": 70.0, "cpu_vs_global": 0.9, "rss_vs_global": 0.7}
     assert et.resource_figures(summary, "global")["total"]["cpu_vs_global"] is None
+
+
+def test_the_path_length_is_summed_along_the_reference_between_the_played_scans():
+    t = np.arange(10.0)
+    xyz = np.column_stack([3.0 * t, 4.0 * t, np.zeros(10)])  # 5 m a second
+    reference = make_trajectory(t, xyz, np.tile([0.0, 0.0, 0.0, 1.0], (10, 1)), "reference")
+    assert et.path_length(reference, np.array([2.0, 5.5, 7.0])) == pytest.approx(25.0)
+    assert et.path_length(reference, np.array([])) == 0.0

@@ -23,9 +23,20 @@ def test_round_trip_and_summary(tmp_path):
     # linearly between order statistics, is 1 + 99 q / 100 (95.05 and 99.01); the maximum 100.
     rng = np.random.default_rng(4)
     ms = rng.permutation(np.arange(1, 101)).astype(float)
-    # Iterations: the scan time's tens digit; hypotheses on every 4th scan, a search on every 10th; NVTL falling.
+    # Iterations: the scan time's tens digit; hypotheses on every 4th scan, a search on every 10th; NVTL falling; the
+    # map worker's CPU time from 3 s, 0.02 s more each scan: 1.98 s over the table.
     rows = [
-        (1700000000.0 + 0.1 * i, s, 0.6 * s, i % 3 != 0, int(s) // 10, 2 * (i % 4 == 0), i % 10 == 0, 2.5 - s / 100)
+        (
+            1700000000.0 + 0.1 * i,
+            s,
+            0.6 * s,
+            i % 3 != 0,
+            int(s) // 10,
+            2 * (i % 4 == 0),
+            i % 10 == 0,
+            2.5 - s / 100,
+            3.0 + 0.02 * i,
+        )
         for i, s in enumerate(ms)
     ]
     path = tmp_path / "scan_times.csv"
@@ -35,7 +46,7 @@ def test_round_trip_and_summary(tmp_path):
     summary = summarize_scan_times(data)
     slow = summary.pop("slow_scans")
     assert summary == pytest.approx(
-        {"scans": 100, "mean": 50.5, "median": 50.5, "p95": 95.05, "p99": 99.01, "max": 100}
+        {"scans": 100, "mean": 50.5, "median": 50.5, "p95": 95.05, "p99": 99.01, "max": 100, "map_worker_cpu_s": 1.98}
     )
     np.testing.assert_allclose(accepted_stamps(data), [r[0] for r in rows if r[3]], atol=1e-6)
     # Over twice the median (101 ms): none. Iterations: 9 scans with 0, 10 each with 1..9, one with 10: median 5.
@@ -86,6 +97,7 @@ def test_an_empty_run_has_no_figures(tmp_path):
         "p99": None,
         "max": None,
         "slow_scans": None,
+        "map_worker_cpu_s": None,
     }
 
 
@@ -96,7 +108,7 @@ def test_an_empty_run_has_no_figures(tmp_path):
         ("stamp_s,scan_time_ms,align_time_ms\n1,2\n", "t.csv"),
         ("stamp_s,scan_time_ms,align_time_ms\n1,x,3\n", "not 3 numbers"),
         ("stamp_s,scan_time_ms,align_time_ms,match_accepted\n1,2,3\n", "expected 4"),
-        (HEADER + "\n1,2,3,1,5,0,0\n", "expected 8"),
+        (HEADER + "\n1,2,3,1,5,0,0\n", "expected 9"),
     ],
 )
 def test_bad_files_are_named(tmp_path, text, message):
@@ -143,3 +155,11 @@ def test_report_table_lists_each_mode_with_its_fusion():
     assert lines[3].endswith("| 6.0 | – | – | – |")  # an older summary: nothing said of its slow scans
     assert len(lines) == 4
     assert scan_time_table({"scenario": {}, "modes": {"global": {}}}) == ["No per-scan times were recorded."]
+
+
+def test_a_table_without_the_map_workers_cpu_time_says_nothing_of_it(tmp_path):
+    older = ",".join(HEADER.split(",")[:8])  # before the map worker's CPU column
+    (tmp_path / "t.csv").write_text(older + "\n1.5,10,8,1,4,0,0,2.1\n1.6,11,9,1,5,0,0,2.2\n")
+    data = read_scan_times(tmp_path / "t.csv")
+    assert np.isnan(data[:, 8]).all()
+    assert summarize_scan_times(data)["map_worker_cpu_s"] is None

@@ -2,8 +2,9 @@
 one row per scan with its stamp [s], the whole scan's time and the matching's [ms] (NdtStatus
 ``scan_time_ms`` and ``align_time_ms``), whether its match was accepted (``match_accepted``, 1 or 0), and what the
 match did: its NDT iterations, the candidates the hypotheses tried, whether the branch-and-bound search ran, and
-the NVTL of the match taken (``iterations``, ``hypotheses``, ``global_search``, ``nvtl``). Tables written before
-the later columns existed are read too; the columns they lack are NaN (unknown)."""
+the NVTL of the match taken (``iterations``, ``hypotheses``, ``global_search``, ``nvtl``), and the CPU time the map
+worker thread had used by then (``map_worker_cpu_s``, since the localizer started). Tables written before the later
+columns existed are read too; the columns they lack are NaN (unknown)."""
 
 from __future__ import annotations
 
@@ -15,29 +16,30 @@ import numpy as np
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.util.atomic import atomic_write
 
-HEADER = "stamp_s,scan_time_ms,align_time_ms,match_accepted,iterations,hypotheses,global_search,nvtl"
+HEADER = "stamp_s,scan_time_ms,align_time_ms,match_accepted,iterations,hypotheses,global_search,nvtl,map_worker_cpu_s"
 COLUMN = {name: index for index, name in enumerate(HEADER.split(","))}
 COLUMNS = len(COLUMN)
 # Older tables have the header's first columns: as many as these.
-OLDER_COLUMNS = (3, 4, 7)
+OLDER_COLUMNS = (3, 4, 7, 8)
 # Scans slower than this many times the median are the tail the issue bounds (p95 <= 2x the median).
 SLOW_OVER_MEDIAN = 2.0
 
 
 def write_scan_times(
-    path: str | os.PathLike, rows: Sequence[tuple[float, float, float, bool, int, int, bool, float]]
+    path: str | os.PathLike, rows: Sequence[tuple[float, float, float, bool, int, int, bool, float, float]]
 ) -> None:
     with atomic_write(path) as f:
         f.write(HEADER + "\n")
-        for stamp, scan_ms, align_ms, accepted, iterations, hypotheses, searched, nvtl in rows:
+        for stamp, scan_ms, align_ms, accepted, iterations, hypotheses, searched, nvtl, worker_cpu_s in rows:
             f.write(
                 f"{stamp:.9f},{scan_ms:.4f},{align_ms:.4f},{int(bool(accepted))},{int(iterations)},"
-                f"{int(hypotheses)},{int(bool(searched))},{nvtl:.4f}\n"
+                f"{int(hypotheses)},{int(bool(searched))},{nvtl:.4f},{worker_cpu_s:.6f}\n"
             )
 
 
 def read_scan_times(path: str | os.PathLike) -> np.ndarray:
-    """An (n, 8) array of the rows (stamp, scan ms, align ms, accepted, iterations, hypotheses, search, NVTL);
+    """An (n, 9) array of the rows (stamp, scan ms, align ms, accepted, iterations, hypotheses, search, NVTL, map
+    worker CPU s);
     raises UserError naming the file when it is not such a table."""
     try:
         with open(path) as f:
@@ -67,12 +69,28 @@ def accepted_stamps(data: np.ndarray) -> np.ndarray | None:
     return data[accepted > 0.5, 0]
 
 
+def map_worker_cpu_s(data: np.ndarray) -> float | None:
+    """CPU time [s] the map worker spent from the first scan of the table to its last; None when it does not say."""
+    cpu = data[:, COLUMN["map_worker_cpu_s"]] if data.size else np.empty(0)
+    return None if cpu.size == 0 or np.isnan(cpu).any() else float(cpu[-1] - cpu[0])
+
+
 def summarize_scan_times(data: np.ndarray) -> dict:
     """Mean, median, 95th and 99th percentile (linear interpolation between order statistics, numpy's default)
-    and maximum of the whole scan's time [ms], the scans counted, and what the slow scans did (slow_scans)."""
+    and maximum of the whole scan's time [ms], the scans counted, what the slow scans did (slow_scans), and the map
+    worker's CPU time over the table [s] (map_worker_cpu_s)."""
     times = data[:, 1]
     if times.size == 0:
-        return {"scans": 0, "mean": None, "median": None, "p95": None, "p99": None, "max": None, "slow_scans": None}
+        return {
+            "scans": 0,
+            "mean": None,
+            "median": None,
+            "p95": None,
+            "p99": None,
+            "max": None,
+            "slow_scans": None,
+            "map_worker_cpu_s": None,
+        }
     return {
         "scans": int(times.size),
         "mean": float(times.mean()),
@@ -81,6 +99,7 @@ def summarize_scan_times(data: np.ndarray) -> dict:
         "p99": float(np.percentile(times, 99)),
         "max": float(times.max()),
         "slow_scans": slow_scans(data),
+        "map_worker_cpu_s": map_worker_cpu_s(data),
     }
 
 

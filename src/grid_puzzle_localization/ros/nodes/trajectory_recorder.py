@@ -27,7 +27,7 @@ class TrajectoryRecorder:
         self.output = output
         self.scan_times_output = scan_times
         self.rows: list[tuple[float, ...]] = []
-        self.scan_times: list[tuple[float, float, float, bool, int, int, bool, float]] = []
+        self.scan_times: list[tuple[float, float, float, bool, int, int, bool, float, float]] = []
         self.dropped = 0
         self.sub = rospy.Subscriber("odom", Odometry, self.on_odom, queue_size=100)
         if scan_times:
@@ -46,6 +46,7 @@ class TrajectoryRecorder:
                 msg.hypotheses,
                 msg.global_search,
                 msg.nvtl,
+                msg.map_worker_cpu_s,
             )
         )
 
