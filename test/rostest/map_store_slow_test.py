@@ -26,7 +26,6 @@ import asyncio
 import json
 import os
 import re
-import signal
 import subprocess
 import sys
 import time
@@ -40,6 +39,7 @@ import rostest
 from fixtures import localizer_replay as replay
 from fixtures import nginx_server
 from fixtures import synthetic_scene as ss
+from fixtures.launch_group import stop_launch_group
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from grid_puzzle_localization.msg import NdtStatus, TileDelta
 from nav_msgs.msg import Odometry
@@ -240,12 +240,7 @@ class MapStoreSlowTest(replay.DriveReplayTest):
 
     @classmethod
     def stop_stack(cls) -> None:
-        os.killpg(cls.stack.pid, signal.SIGINT)
-        try:
-            cls.stack.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            os.killpg(cls.stack.pid, signal.SIGKILL)
-            cls.stack.wait()
+        stop_launch_group(cls.stack)
         cls.stack_log.close()
         cls.proxy.stop()
         cls.server.close()

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import hashlib
 import os
-import signal
 import subprocess
 import threading
 import time
@@ -23,6 +22,7 @@ import rostest
 from fixtures import localizer_replay as replay
 from fixtures import nginx_server
 from fixtures import synthetic_scene as ss
+from fixtures.launch_group import stop_launch_group
 from fixtures.odometry_track import OdometryTrack
 from grid_puzzle_localization.msg import NdtStatus, ProviderStatus
 from rosgraph_msgs.msg import Log
@@ -97,12 +97,7 @@ class MapStoreStackTest(replay.DriveReplayTest):
 
     @classmethod
     def tearDownClass(cls) -> None:
-        os.killpg(cls.stack.pid, signal.SIGINT)
-        try:
-            cls.stack.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            os.killpg(cls.stack.pid, signal.SIGKILL)
-            cls.stack.wait()
+        stop_launch_group(cls.stack)
         cls.stack_log.close()
         cls.server.close()
         super().tearDownClass()

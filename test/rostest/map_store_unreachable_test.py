@@ -5,9 +5,7 @@ ends, while a directory would be waited for. Nothing listens on the port (nginx_
 
 from __future__ import annotations
 
-import os
 import re
-import signal
 import subprocess
 import tempfile
 import time
@@ -17,6 +15,7 @@ from pathlib import Path
 import rospy
 import rostest
 from fixtures import nginx_server
+from fixtures.launch_group import stop_launch_group
 
 WAIT = 60.0  # [s] upper bound on waiting for both providers to stop (never asserted as a time)
 
@@ -44,12 +43,7 @@ class MapStoreUnreachableTest(unittest.TestCase):
             deadline = time.monotonic() + WAIT
             while time.monotonic() < deadline and not cls.both_stopped(log_path.read_text(errors="replace")):
                 time.sleep(0.5)
-            os.killpg(launch.pid, signal.SIGINT)
-            try:
-                launch.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                os.killpg(launch.pid, signal.SIGKILL)
-                launch.wait()
+            stop_launch_group(launch)
         cls.log = log_path.read_text(errors="replace")
 
     @classmethod
