@@ -8,6 +8,10 @@ For `make bench-map-store`'s drives, in front of nginx; asyncio, one thread, no 
     proxy = DelayProxy(upstream_port, one_way_delay_s=0.05, rate_requests_s=50.0)  # 100 ms a request, 50 a second
     proxy.start()  # serves on proxy.port until proxy.stop()
 
+As a program (the gtests' slow store), until SIGTERM or SIGINT:
+
+    python3 bench/delay_proxy.py UPSTREAM_PORT --port PORT [--delay S] [--requests-per-second R] [--bytes-per-second B]
+
 The request rate counts HTTP request heads (each ends in an empty line) in what the clients send, so it holds for
 requests without a body (GET, HEAD), over kept-alive connections as over a connection per request. Request k is
 passed on to the server at its slot, s_k = max(arrival + one-way delay, s_(k-1) + 1 / rate), and its answer comes
@@ -16,8 +20,11 @@ back a one-way delay later: answers start at most `rate` a second, and no sooner
 
 from __future__ import annotations
 
+import argparse
 import asyncio
+import signal
 import socket
+import sys
 import threading
 import time
 
@@ -31,15 +38,19 @@ class DelayProxy:
         one_way_delay_s: float,
         rate_bytes_s: float | None = None,
         rate_requests_s: float | None = None,
+        port: int = 0,
     ) -> None:
+        """``port``: where it listens on 127.0.0.1 (0: a free port, in ``self.port``)."""
         self.upstream_port = upstream_port
         self.delay = one_way_delay_s
         self.rate = rate_bytes_s  # None: no byte limit
         self.request_rate = rate_requests_s  # None: no request limit
         self.requests = 0  # request heads seen (all connections)
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            self.port = s.getsockname()[1]
+        self.port = port
+        if not port:
+            with socket.socket() as s:
+                s.bind(("127.0.0.1", 0))
+                self.port = s.getsockname()[1]
         self._loop = asyncio.new_event_loop()
         self._thread = threading.Thread(target=self._loop.run_forever, name="delay_proxy", daemon=True)
         self._server: asyncio.base_events.Server | None = None
@@ -123,3 +134,25 @@ class DelayProxy:
             queue.put_nowait((0.0, 0.0, None))
             await asyncio.gather(sender, return_exceptions=True)
             writer.close()
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description="A delaying, rate-limiting TCP proxy to 127.0.0.1:UPSTREAM_PORT.")
+    parser.add_argument("upstream_port", type=int)
+    parser.add_argument("--port", type=int, required=True, help="where it listens on 127.0.0.1")
+    parser.add_argument("--delay", type=float, default=0.0, help="one-way delay [s] (0)")
+    parser.add_argument("--requests-per-second", type=float, help="at most this many requests a second (no limit)")
+    parser.add_argument("--bytes-per-second", type=float, help="each direction's byte rate (no limit)")
+    args = parser.parse_args()
+    proxy = DelayProxy(args.upstream_port, args.delay, args.bytes_per_second, args.requests_per_second, args.port)
+    stop = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+    proxy.start()
+    stop.wait()
+    proxy.stop()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -76,10 +76,9 @@ class NginxServer {
     return "";
   }
 
-  /// Serves the files of `root` at http://127.0.0.1:port/; `extra` is added inside the server block (locations),
-  /// `http_extra` inside the http block (e.g. a limit_req_zone). Not started yet: start().
-  NginxServer(std::string root, std::string extra = "", std::string http_extra = "")
-      : root_(std::move(root)), extra_(std::move(extra)), http_extra_(std::move(http_extra)) {
+  /// Serves the files of `root` at http://127.0.0.1:port/; `extra` is added inside the server block (locations).
+  /// Not started yet: start().
+  NginxServer(std::string root, std::string extra = "") : root_(std::move(root)), extra_(std::move(extra)) {
     char tmpl[] = "/tmp/gpl_nginx_XXXXXX";
     if (::mkdtemp(tmpl) == nullptr) throw std::runtime_error("mkdtemp failed");
     dir_ = tmpl;
@@ -141,12 +140,11 @@ class NginxServer {
          << "  client_body_temp_path " << dir_ << "/client_body;\n  proxy_temp_path " << dir_ << "/proxy;\n"
          << "  fastcgi_temp_path " << dir_ << "/fastcgi;\n  uwsgi_temp_path " << dir_ << "/uwsgi;\n"
          << "  scgi_temp_path " << dir_ << "/scgi;\n"
-         << http_extra_ << "\n"
          << "  server {\n    listen 127.0.0.1:" << port_ << ";\n    root " << root_ << ";\n"
          << extra_ << "\n  }\n}\n";
   }
 
-  std::string root_, extra_, http_extra_, dir_;
+  std::string root_, extra_, dir_;
   int port_ = 0;
   pid_t pid_ = -1;
 };

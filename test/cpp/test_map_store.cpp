@@ -569,30 +569,14 @@ TEST_F(MapWorkerOverHttp, AfterAnOutageEachChangeRetriesOneFetchBatchOfTheFailed
 
 // ---- a window from a slow store arrives nearest the vehicle first and is matched on as it arrives
 
-namespace {
-
-// nginx serving the world's index at once and its tiles at most `per_second` a second, all connections together (a
-// slow store: nginx's limit_req delays the requests over the rate, none is refused).
-std::unique_ptr<NginxServer> throttledServer(const ServedWorld& world, int per_second) {
-  const std::string map = world.root + "/map/";
-  auto server = std::make_unique<NginxServer>(
-      world.root,
-      "    location /throttled/ { alias " + map + "; }\n    location ~ ^/throttled/(.+\\.pcd)$ { alias " + map +
-          "$1; limit_req zone=tiles burst=100000; }\n",
-      "  limit_req_zone $server_port zone=tiles:1m rate=" + std::to_string(per_second) + "r/s;");
-  server->start();
-  return server;
-}
-
-}  // namespace
-
 TEST_F(MapWorkerOverHttp, ASlowWindowIsPublishedAsItArrivesNearestTheFocusFirstWithWhatIsStillInFlight) {
-  const auto slow = throttledServer(world_, 300);  // 600 tiles: 2 s
+  // nginx behind bench/delay_proxy.py: at most 300 requests a second, all connections together (600 tiles: 2 s).
+  const gpl_test::DelayProxyServer slow(server_->port(), 300.0);
   gpl::MapUpdateWorker worker{gpl::VoxelMapParams()};
   worker.setMapStoreConfig(config_);
   const Eigen::Vector2d focus(12.0, -7.0);
   worker.setFocus(focus);
-  worker.submit(fileChange(slow->url("/throttled"), world_.revision(), true, world_.ids));
+  worker.submit(fileChange(slow.url("/map"), world_.revision(), true, world_.ids));
   // The first snapshot announces the whole window in flight before any tile arrives (no map yet).
   std::optional<gpl::MapSnapshot> announced, partial, latest;
   while (worker.busy()) {
@@ -645,7 +629,7 @@ TEST_F(MapWorkerOverHttp, ASlowWindowIsPublishedAsItArrivesNearestTheFocusFirstW
 }
 
 TEST_F(MapWorkerOverHttp, AStartOnASlowStoreWaitsForTheTilesAroundItAndIsNotLostMeanwhile) {
-  const auto slow = throttledServer(world_, 300);
+  const gpl_test::DelayProxyServer slow(server_->port(), 300.0);
   gpl::LocalizerConfig c;
   c.preprocess.voxel_size = 0.4;
   c.preprocess.max_range = 30.0;
@@ -657,7 +641,7 @@ TEST_F(MapWorkerOverHttp, AStartOnASlowStoreWaitsForTheTilesAroundItAndIsNotLost
   const gpl::PointCloud world = gpl::test::makeWorld();
   loc.map().setFocus(standing.translation().head<2>());
   loc.setInitialPose(standing);
-  loc.map().submit(fileChange(slow->url("/throttled"), world_.revision(), true, world_.ids));
+  loc.map().submit(fileChange(slow.url("/map"), world_.revision(), true, world_.ids));
   std::size_t waited_for_tiles = 0, tracked = 0, in_flight_at_first_pose = 0;
   for (int i = 0; tracked < 10 && i < 2000; ++i) {
     const gpl::LocalizerOutput out =
