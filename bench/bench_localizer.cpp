@@ -14,9 +14,19 @@
 // R]
 //                        [--max-range M] [--max-step-size M] [--coarse-points N] [--coarse-yaw-probe RAD]
 //                        [--trace FILE] [--tile-source DIR|URL] [--index-revision REV]
-//                        [--map-store-cache DIR]
+//                        [--map-store-cache DIR] [--cold-start 0|1] [--pace rate|stamps]
 // --trace writes one CSV row per scan (latency, NDT iterations, prediction and ground-truth errors, whether the
-// match was accepted and the pose published, the pose, the monotonic clock, whether the map store answers) to FILE.
+// match was accepted and the pose published, the localizer's state, lost, the window's tiles in flight and those the
+// scan waited for, those in flight within map_wait_half_side of the first scan's true position (before the first map
+// is swapped in: all of the first window's there), the pose, the monotonic clock, whether the map store answers, the
+// true position) to FILE.
+// --cold-start 1: the drive starts as soon as the first window is submitted, without waiting for its tiles (the
+// localizer waits for those around the start itself, as from a slow map store); the JSON line then gives the first
+// window's tile count and the time until all of it was in the map (first_window). The window follows the pose only
+// while the localizer tracks, and the tiles still to load go nearest the initial pose, then nearest each tracked
+// scan's prediction first (the map worker's focus, as the nodelet sets it).
+// --pace stamps: each scan is handed over at its own stamp after the first (a recording's real time, e.g. keyframes
+// at irregular intervals) instead of every 1 / rate_hz.
 // --tile-source: tiles mode names the window's tiles by reference, as the provider does, in a tile directory that
 // `gpm tile` cut from the same map with the same tile size, or at the URL of a map store serving one (fetched into
 // --map-store-cache; --index-revision is then the revision of its index.json, as the provider sends it);
@@ -237,7 +247,8 @@ int main(int argc, char** argv) {
         stderr,
         "usage: %s INPUT.bin cloud|tiles|repeat|replay [--tile-size S] [--window N] [--threads T] [--resolution R] "
         "[--max-range M] [--max-step-size M] [--coarse-points N] [--coarse-yaw-probe RAD] [--trace FILE] "
-        "[--tile-source DIR|URL] [--index-revision REV] [--map-store-cache DIR]\n",
+        "[--tile-source DIR|URL] [--index-revision REV] [--map-store-cache DIR] [--cold-start 0|1] "
+        "[--pace rate|stamps]\n",
         argv[0]);
     return 2;
   }
@@ -254,7 +265,8 @@ int main(int argc, char** argv) {
   // so a replay gives the same answer every run.
   config.lost.background_search = false;
   gpl::MapStoreConfig store_config;
-  std::string trace_path, tile_source, index_revision;
+  std::string trace_path, tile_source, index_revision, pace = "rate";
+  bool cold_start = false;
   for (int i = 3; i + 1 < argc; i += 2) {
     const std::string opt = argv[i];
     if (opt == "--tile-size")
@@ -281,10 +293,18 @@ int main(int argc, char** argv) {
       index_revision = argv[i + 1];
     else if (opt == "--map-store-cache")
       store_config.cache_dir = argv[i + 1];
+    else if (opt == "--cold-start")
+      cold_start = std::stoi(argv[i + 1]) != 0;
+    else if (opt == "--pace")
+      pace = argv[i + 1];
     else {
       std::fprintf(stderr, "bench_localizer: unknown option %s\n", opt.c_str());
       return 2;
     }
+  }
+  if (pace != "rate" && pace != "stamps") {
+    std::fprintf(stderr, "bench_localizer: --pace must be rate or stamps (got '%s')\n", pace.c_str());
+    return 2;
   }
   Input input;
   Scan scan;
@@ -343,9 +363,26 @@ int main(int argc, char** argv) {
   };
 
   follow(scan.truth.translation());
-  loc.map().waitIdle();
+  const std::size_t first_window_tiles = loaded.size();
+  cold_start = cold_start && mode != "repeat";
+  if (!cold_start) loc.map().waitIdle();
   if (mode == "repeat") return repeatFirstScan(loc, input, scan);
   loc.setInitialPose(scan.truth);
+  // A cold start orders the tiles still to load as the nodelet does: nearest the initial pose, then nearest each
+  // tracked scan's prediction.
+  if (cold_start) loc.map().setFocus(scan.truth.translation().head<2>());
+  const Eigen::Vector2d start_xy = scan.truth.translation().head<2>();
+  double first_window_load_ms = -1.0;  // the first whole snapshot's update time (cold start)
+  // The first window's tiles that meet the square of half side map_wait_half_side about the start (as
+  // TilesInFlight::within counts them): all in flight until the localizer has a map.
+  std::size_t start_square_tiles = 0;
+  for (const TileKey& k : loaded) {
+    const Eigen::Vector2d low(k.first * tile_size, k.second * tile_size);
+    const double half = config.map_wait_half_side;
+    if ((low.array() < start_xy.array() + half).all() && (low.array() + tile_size > start_xy.array() - half).all())
+      ++start_square_tiles;
+  }
+  bool have_map = false;  // a target was swapped in
 
   std::ofstream trace;
   if (!trace_path.empty()) {
@@ -357,7 +394,8 @@ int main(int argc, char** argv) {
     trace << "scan,stamp_s,scan_ms,align_ms,cpu_ms,iterations,evaluations,coarse_evaluations,source_points,"
              "update_pending,prediction_to_match_m,prediction_to_match_rad,prediction_error_m,prediction_error_rad,"
              "error_m,error_rad,truth_yaw_rate_rad_s,accepted,published,hypotheses,global_search,nvtl,"
-             "global_search_reason,x,y,yaw,monotonic_s,map_store_reachable\n";
+             "global_search_reason,state,lost,tiles_in_flight,tiles_awaited,start_tiles_in_flight,x,y,yaw,"
+             "monotonic_s,map_store_reachable,truth_x,truth_y\n";
   }
   // latency_loading: scans that overlapped a target update and ran no branch-and-bound search (a search, e.g. on
   // the first scan without a measured velocity, costs tens of ms whatever the map does).
@@ -369,6 +407,8 @@ int main(int argc, char** argv) {
   double distance = 0.0;  // [m] driven (ground truth)
   std::uint64_t generation = loc.map().stats().generation;
   auto next = std::chrono::steady_clock::now();
+  const auto drive_start = next;
+  const double first_stamp = scan.stamp;
   std::size_t gyro_fed = 0;
   Eigen::Isometry3d last_truth = scan.truth;
   double last_stamp = scan.stamp;
@@ -380,13 +420,17 @@ int main(int argc, char** argv) {
     }
     for (; gyro_fed < input.gyro.size() && input.gyro[gyro_fed].stamp <= scan.stamp; ++gyro_fed)
       loc.addGyro(input.gyro[gyro_fed].stamp, input.gyro[gyro_fed].rate);
-    if (!replay) {
+    if (!replay && pace == "stamps") {
+      std::this_thread::sleep_until(drive_start + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                                      std::chrono::duration<double>(scan.stamp - first_stamp)));
+    } else if (!replay) {
       std::this_thread::sleep_until(next);
       next += scanPeriod(input);
     }
     const double cpu_start = threadCpuMs();
     const gpl::LocalizerOutput out = loc.processScan(scan.stamp, scan.points, input.base_T_sensor, &scan.times);
     const double cpu_ms = threadCpuMs() - cpu_start;
+    have_map = have_map || out.map_swapped;
     // The first scan swaps in the initial map and converges from the initial pose: reported on its own.
     if (i == 0) {
       first_scan_ms = out.scan_ms;
@@ -416,24 +460,34 @@ int main(int argc, char** argv) {
             << rotationAngle(out.prediction, scan.truth) << ','
             << (out.pose.translation() - scan.truth.translation()).norm() << ',' << rotationAngle(out.pose, scan.truth)
             << ',' << yaw_rate << ',' << out.match_accepted << ',' << out.publish << ',' << out.hypotheses << ','
-            << out.global_search << ',' << out.ndt.nvtl << ",\"" << reason << "\"," << std::setprecision(9)
-            << out.pose.translation().x() << ',' << out.pose.translation().y() << ','
+            << out.global_search << ',' << out.ndt.nvtl << ",\"" << reason << "\"," << gpl::toString(out.state) << ','
+            << out.lost << ',' << out.tiles_in_flight << ',' << out.tiles_awaited << ','
+            << (have_map ? loc.tilesAwaited(start_xy, config.map_wait_half_side) : start_square_tiles) << ','
+            << std::setprecision(9) << out.pose.translation().x() << ',' << out.pose.translation().y() << ','
             << std::atan2(out.pose.linear()(1, 0), out.pose.linear()(0, 0)) << ',' << monotonicSeconds() << ','
-            << loc.map().stats().map_store_reachable << std::defaultfloat << std::setprecision(6) << '\n';
+            << loc.map().stats().map_store_reachable << ',' << scan.truth.translation().x() << ','
+            << scan.truth.translation().y() << std::defaultfloat << std::setprecision(6) << '\n';
     }
     if (!out.match_accepted) ++rejected;
-    errors.push_back((out.pose.translation() - scan.truth.translation()).norm());
+    // A scan that waited for its map (cold start) has no pose.
+    if (out.state == gpl::LocalizerState::kTracking)
+      errors.push_back((out.pose.translation() - scan.truth.translation()).norm());
     distance += (scan.truth.translation() - last_truth.translation()).norm();
     const gpl::MapUpdateStats stats = loc.map().stats();
     if (stats.generation != generation) {
       generation = stats.generation;
       update_ms.push_back(stats.update_ms);
+      if (first_window_load_ms < 0.0) first_window_load_ms = stats.update_ms;
     }
-    follow(out.pose.translation());
+    if (out.state == gpl::LocalizerState::kTracking) {
+      if (cold_start) loc.map().setFocus(out.prediction.translation().head<2>());
+      follow(out.pose.translation());
+    }
   }
   loc.map().waitIdle();
   const gpl::MapUpdateStats end = loc.map().stats();
   if (end.generation != generation) update_ms.push_back(end.update_ms);
+  if (first_window_load_ms < 0.0 && end.generation != generation) first_window_load_ms = end.update_ms;
   const std::vector<std::string> failed = loc.map().takeErrors();  // e.g. tiles a map store could not serve
 
   double mean_error = 0.0;
@@ -451,7 +505,8 @@ int main(int argc, char** argv) {
       "\"translation_error_m\": {\"mean\": %.4f, \"max\": %.4f}, \"map_points\": %zu, \"tile_size_m\": %.1f, "
       "\"window_tiles\": %d, \"ndt_threads\": %d, \"map_update_threads\": %d, \"gyro_samples\": %zu, "
       "\"peak_rss_mb\": %.1f, \"distance_m\": %.1f, \"map_store\": {\"tiles_fetched\": %zu, \"bytes_fetched\": %llu, "
-      "\"reachable\": %s}, \"map_update_failures\": %zu}\n",
+      "\"reachable\": %s}, \"map_update_failures\": %zu, \"cold_start\": %s, \"pace\": \"%s\", "
+      "\"first_window\": {\"tiles\": %zu, \"start_square_tiles\": %zu, \"load_ms\": %.1f}}\n",
       mode.c_str(), static_cast<std::size_t>(input.scans), first_scan_ms, percentile(latency, 0.5),
       percentile(latency, 0.95), percentile(latency, 0.99), percentile(latency, 1.0),
       percentile(latency, 0.99) / percentile(latency, 0.5), percentile(latency_pending, 1.0), latency_pending.size(),
@@ -460,6 +515,7 @@ int main(int argc, char** argv) {
       percentile(update_ms, 1.0), rejected, mean_error, percentile(errors, 1.0), input.map.size(), tile_size,
       (2 * half_window + 1) * (2 * half_window + 1), config.ndt.threads, config.map_update_threads, input.gyro.size(),
       peakRssMb(), distance, end.map_store_fetched, static_cast<unsigned long long>(end.map_store_bytes),
-      end.map_store_reachable ? "true" : "false", failed.size());
+      end.map_store_reachable ? "true" : "false", failed.size(), cold_start ? "true" : "false", pace.c_str(),
+      first_window_tiles, start_square_tiles, cold_start ? first_window_load_ms : 0.0);
   return 0;
 }

@@ -15,7 +15,11 @@
    Each run prints bench_localizer's JSON line plus: the between-runs RMSE of its poses against the disk run's,
    bytes fetched per km driven, and for the outage the scans matched while the server was down and the time from
    its return until the store answered again.
---quick: bench-localizer's synthetic street instead, 6 s with a 1.5 s outage (checks that it runs).
+3. A cold start and a drive on throttled stores (bench_map_store_throttled.py): both stretches of kitti00_far, 2 m
+   tiles, from disk, from nginx behind the proxy limited to 50, 100 and 200 tiles/s with a 100 ms round trip, and
+   from `python3 -m http.server`; one JSON line per run with the figures and targets of issue 58.
+--quick: bench-localizer's synthetic street instead, 6 s with a 1.5 s outage, and part 3 on it at one rate (checks
+that it runs).
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import bench_localizer
+import bench_map_store_throttled
 import numpy as np
 import replay_scenario
 from delay_proxy import DelayProxy
@@ -133,6 +138,7 @@ def outage_figures(trace: dict, down_at: float, up_at: float) -> dict:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="the synthetic street, 6 s, with a 1.5 s outage")
+    parser.add_argument("--traces", type=Path, help="keep the per-scan traces of the throttled runs (part 3) in DIR")
     workspace = Path(os.environ["GPL_WS"])  # exported by tools/env.sh (the Makefile sources it)
     bin_dir = workspace / "devel/lib/grid_puzzle_localization"
     args = parser.parse_args()
@@ -210,6 +216,12 @@ def main() -> int:
         finally:
             proxy.stop()
             server.close()
+        street = None
+        if args.quick:
+            street = bench_map_store_throttled.Stretch(
+                drive.route, drive.data, drive.www / "map", drive.tile_size, drive.half_window
+            )
+        bench_map_store_throttled.run(bin_dir, args.quick, street, args.traces)
     return 0
 
 
