@@ -202,10 +202,7 @@ class Localizer {
   /// the first scan after it is ready.
   MapUpdateWorker& map() { return worker_; }
 
-  /// The pose (map_T_base) to start from at the next scan, e.g. from rviz. When the map around it takes longer than
-  /// prediction/max_extrapolation to arrive (a slow map store), it is taken as the pose at the first scan after it
-  /// came, and the scan then is placed by the search of the region the vehicle can have reached since. Scan thread
-  /// only.
+  /// The pose (map_T_base) to start from at the next scan, e.g. from rviz. Scan thread only.
   void setInitialPose(const Eigen::Isometry3d& map_T_base);
   /// The start pose used after construction and after every reset (from parameters). Scan thread only.
   void setDefaultInitialPose(const Eigen::Isometry3d& map_T_base);
@@ -338,7 +335,6 @@ class Localizer {
   GyroIntegrator gyro_;
   FusionTracker fusion_;
   std::optional<Eigen::Isometry3d> pending_initial_pose_;
-  std::optional<double> pending_since_;  // [s] stamp of the first scan that saw pending_initial_pose_
   std::optional<Eigen::Isometry3d> default_initial_pose_;
   std::optional<double> last_stamp_;
   MotionBounds motion_seen_;                     // fastest accepted motion since the initial pose

@@ -110,10 +110,7 @@ Localizer::Localizer(const LocalizerConfig& config)
       fusion_(config.fusion),
       global_(globalSearchConfig(config)) {}
 
-void Localizer::setInitialPose(const Eigen::Isometry3d& map_T_base) {
-  pending_initial_pose_ = map_T_base;
-  pending_since_.reset();
-}
+void Localizer::setInitialPose(const Eigen::Isometry3d& map_T_base) { pending_initial_pose_ = map_T_base; }
 
 void Localizer::setDefaultInitialPose(const Eigen::Isometry3d& map_T_base) {
   default_initial_pose_ = map_T_base;
@@ -134,7 +131,6 @@ void Localizer::reset() {
   fusion_.reset();
   gyro_.clear();
   pending_initial_pose_ = default_initial_pose_;
-  pending_since_.reset();
   last_twist_.reset();
   last_stamp_.reset();
   source_stamp_.reset();
@@ -370,7 +366,6 @@ StartSearch Localizer::judgeStart(GlobalLocalizationResult r, double stamp) {
 void Localizer::startFrom(const Eigen::Isometry3d& pose, double stamp, const Matrix6d& covariance,
                           double reference_nvtl) {
   pending_initial_pose_.reset();
-  pending_since_.reset();
   predictor_.reset(pose, stamp);
   last_twist_.reset();
   motion_seen_ = MotionBounds();
@@ -494,25 +489,15 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   }
   out.tiles_in_flight = in_flight_.keys.size();
   // A given pose is matched from once the tiles around it have arrived: a partial map could fit the scan elsewhere.
-  if (pending_initial_pose_) {
-    if (!pending_since_) pending_since_ = stamp;
+  if (pending_initial_pose_)
     out.tiles_awaited = tilesAwaited(pending_initial_pose_->translation().head<2>(), config_.map_wait_half_side);
-  }
   if (!target_ || target_->gaussianCount() == 0 || out.tiles_awaited > 0) {
     out.state = LocalizerState::kWaitingForMap;
     out.scan_ms = msSince(start);
     return out;
   }
-  // A given pose that waited for its map longer than prediction/max_extrapolation is where the vehicle was when it
-  // came, not where it is now (a car drives on while a slow store delivers the tiles): a match from it could settle
-  // on a look-alike place metres back. The track starts from it at that time, and this scan is placed by the search of
-  // the region the vehicle can have reached since, as after a gap.
-  const std::optional<double> pending_since = pending_since_;
-  const bool stale_start =
-      pending_initial_pose_ && stamp - pending_since.value_or(stamp) > config_.prediction.max_extrapolation;
-  const bool fresh = pending_initial_pose_.has_value() && !stale_start;
-  if (pending_initial_pose_)
-    startFrom(*pending_initial_pose_, fresh ? stamp : *pending_since, predictionCovariance(config_.covariance), 0.0);
+  const bool fresh = pending_initial_pose_.has_value();
+  if (fresh) startFrom(*pending_initial_pose_, stamp, predictionCovariance(config_.covariance), 0.0);
   // A start search beside the scan thread that has finished is judged; a confirmed answer starts the track, and this
   // scan is matched from it.
   if (!predictor_.initialized()) out.start_search = takeStartSearch();
@@ -684,7 +669,6 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     // The map around a new initial pose may still be loading (a window of tiles arrives over the first scans): the
     // pose is kept for the next scan instead of being searched from as a lost track.
     pending_initial_pose_ = predictor_.pose();
-    pending_since_ = pending_since;  // still the time the pose came
     predictor_ = PosePredictor();
     ++track_version_;
     out.state = LocalizerState::kWaitingForMap;

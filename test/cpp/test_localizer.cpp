@@ -73,36 +73,6 @@ TEST(Localizer, WaitsForMapThenInitialPoseThenTracksGroundTruth) {
   EXPECT_NEAR(out.twist(0), std::hypot(4.0, 0.8 * std::cos(0.4 * 4.0)), 0.2);
 }
 
-// A pose given while the map is still missing (a slow store) is where the vehicle was then: when the map comes 3 s
-// later, the vehicle has driven 12 m on (4 m/s, then it stands). The scan then is not matched from the stale pose but
-// placed by the search of the region the vehicle can have reached, and nothing off the ground truth is published.
-TEST(Localizer, AnInitialPoseThatWaitedForItsMapIsSearchedAroundNotMatchedFrom) {
-  const gpl::PointCloud world = t::makeWorld();
-  const auto truth = [](double time) { return t::poseXYYaw(-15.0 + 4.0 * std::min(time, 3.0), 2.0, 0.1); };
-  const auto scan = [&](double time, unsigned seed) {
-    return t::scanFrom(world, truth(time) * mount(), 30.0f, 0.01f, seed);
-  };
-  gpl::Localizer loc(testConfig());
-  loc.setInitialPose(truth(0.0));
-  int i = 0;
-  for (; 0.1 * i < 3.0; ++i) {  // no map yet: the pose waits
-    const gpl::LocalizerOutput out = loc.processScan(0.1 * i, scan(0.1 * i, 60 + i), mount());
-    ASSERT_EQ(out.state, gpl::LocalizerState::kWaitingForMap);
-    EXPECT_FALSE(out.publish);
-  }
-  loadMap(loc, world);
-  int published = 0;
-  for (; 0.1 * i < 4.0; ++i) {
-    const double time = 0.1 * i;
-    const gpl::LocalizerOutput out = loc.processScan(time, scan(time, 60 + i), mount());
-    ASSERT_EQ(out.state, gpl::LocalizerState::kTracking);
-    if (!out.publish) continue;
-    ++published;
-    EXPECT_LT(t::translationError(out.pose, truth(time)), 0.05) << "scan at " << time << " s";
-  }
-  EXPECT_GT(published, 5) << "the search never placed the vehicle";
-}
-
 TEST(Localizer, SlidingWindowFusionTracksGroundTruthWithImu) {
   const gpl::PointCloud world = t::makeWorld();
   gpl::LocalizerConfig config = testConfig();
