@@ -6,7 +6,8 @@ Ubuntu 20.04 with ROS Noetic (where the ROS package keys resolve to ros-noetic-*
 is not a ROS package) for Debian 12 and Debian 11 too (Debian names its ROS packages itself, which rosdistro does
 not list). Then every find_package of the CMake files and every import of a third-party Python module of
 src/grid_puzzle_localization, scripts, tools, bench and test must be covered by a key of a kind that fits: code
-that the package runs (src/, scripts/) needs an exec key, the build outside its tests a build key.
+that the package runs (src/, scripts/) needs an exec key, the build outside its tests a build key. The sources are
+read by tools/dependency_scan.py; this tool maps what they use to keys and resolves the keys.
 
     check_rosdep.py                              # check; print the keys and their packages
     check_rosdep.py --apt-names debian:bullseye  # the apt packages of the system keys, one a line
@@ -19,16 +20,16 @@ Exit status: 0 when everything resolves and is covered, 1 when not (each problem
 from __future__ import annotations
 
 import argparse
-import ast
 import hashlib
 import importlib.util
 import os
 import re
 import sys
-import sysconfig
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import NamedTuple
+
+from dependency_scan import ALL_KINDS, find_packages, third_party_imports
 
 ROOT = Path(__file__).resolve().parents[1]
 ROSDISTRO = "noetic"
@@ -46,7 +47,6 @@ TAG_KINDS = {
     "depend": ("build", "build_export", "exec"),
     "test_depend": ("test",),
 }
-ALL_KINDS = ("build", "build_export", "exec", "test")
 
 # find_package names of system libraries and the rosdep keys that provide them. A ROS package (pluginlib, rostest,
 # catkin's COMPONENTS) is covered by the key of its own name. An empty tuple: part of the toolchain, no key needed.
@@ -87,9 +87,6 @@ UNDECLARED_MODULES = {
     "evo": "test_evaluation's cross-check, skipped by pytest.importorskip without it",
     "rosdep2": "rosdep itself (this tool), which installs the keys; its test skips without it",
 }
-
-PYTHON_TREES = ("src/grid_puzzle_localization", "scripts", "tools", "bench", "test")
-RUNTIME_TREES = ("src", "scripts")  # what the package runs: its imports need exec keys
 
 
 class Use(NamedTuple):
@@ -213,117 +210,26 @@ def resolve(view, context, keys: list[str]) -> dict[str, Resolution]:
     return resolved
 
 
-CMAKE_TOKEN = re.compile(r'#[^\n]*|"(?:\\.|[^"\\])*"|[()]|[^\s()#"]+')  # comment, string, parenthesis, word
-
-
-def cmake_commands(path: Path) -> list[tuple[str, list[str], int]]:
-    """The commands of a CMake file: (name in lower case, arguments without quotes or parentheses, line)."""
-    text = path.read_text()
-    commands: list[tuple[str, list[str], int]] = []
-    depth = 0
-    for match in CMAKE_TOKEN.finditer(text):
-        token = match.group()
-        if token in "()":
-            depth += 1 if token == "(" else -1
-        elif depth == 0 and not token.startswith("#"):
-            commands.append((token.lower(), [], text.count("\n", 0, match.start()) + 1))
-        elif not token.startswith("#"):
-            commands[-1][1].append(token.strip('"'))
-    return commands
-
-
 def cmake_uses(root: Path, ros_packages: set[str]) -> list[Use]:
-    """The find_package calls of the CMake files. In the package's CMakeLists.txt they need a build key, except under
-    if(CATKIN_ENABLE_TESTING), where a test key does too, as in the CMake projects of test/ (sanitizers, fuzzing)."""
-    uses = []
-    for path in [root / "CMakeLists.txt", *sorted((root / "test").rglob("CMakeLists.txt"))]:
-        testing = [path.parent != root]  # one entry per open if(): whether it is a test-only block
-        for command, args, line in cmake_commands(path):
-            if command == "if":
-                testing.append(testing[-1] or "CATKIN_ENABLE_TESTING" in args)
-            elif command in ("else", "elseif"):
-                testing[-1] = testing[-2]
-            elif command == "endif":
-                testing.pop()
-            elif command == "find_package" and args:
-                kinds = ("build", "test") if testing[-1] else ("build",)
-                where = f"{path.relative_to(root)}:{line}"
-                for name in find_package_names(args):
-                    keys = (name,) if name in ros_packages else FIND_PACKAGE_KEYS.get(name)
-                    uses.append(Use(f"find_package({name})", where, keys, kinds))
-    return uses
-
-
-def find_package_names(args: list[str]) -> list[str]:
-    """The packages one find_package call finds: its first argument, and for catkin its COMPONENTS."""
-    if args[0] != "catkin" or "COMPONENTS" not in args:
-        return [args[0]]
-    components = args[args.index("COMPONENTS") + 1 :]
-    return [args[0], *(c for c in components if not c.isupper())]
-
-
-def python_files(root: Path) -> list[Path]:
-    """The package's Python files: *.py in its Python trees and the Python scripts of scripts/."""
-    files = [p for tree in PYTHON_TREES for p in sorted((root / tree).rglob("*.py")) if "__pycache__" not in p.parts]
-    scripts = sorted(p for p in (root / "scripts").iterdir() if p.is_file() and p.suffix != ".py")
-    return files + [p for p in scripts if "python" in p.read_text(errors="replace").partition("\n")[0]]
-
-
-def own_modules(files: list[Path], root: Path) -> set[str]:
-    """Module names the package itself provides: every Python file's and every directory's name in its trees."""
-    names = {p.stem for p in files}
-    names.update(part for p in files for part in p.relative_to(root).parent.parts)
-    return names
-
-
-def imported_modules(path: Path) -> list[tuple[str, int]]:
-    """The top-level modules a Python file imports (absolute imports), with their lines."""
-    modules = []
-    for node in ast.walk(ast.parse(path.read_bytes(), filename=str(path))):
-        if isinstance(node, ast.Import):
-            modules += [(alias.name.split(".")[0], node.lineno) for alias in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            modules.append((node.module.split(".")[0], node.lineno))
-    return modules
-
-
-def is_stdlib(name: str) -> bool:
-    """Whether a top-level module is part of Python's standard library. Before Python 3.10 (no
-    sys.stdlib_module_names): a built-in module, or one found in the standard library's directory (not in its
-    site-packages)."""
-    names = getattr(sys, "stdlib_module_names", None)
-    if names is not None:
-        return name in names
-    if name in sys.builtin_module_names:
-        return True
-    spec = importlib.util.find_spec(name)
-    if spec is None or spec.origin is None:
-        return False
-    if spec.origin == "frozen":
-        return True
-    origin = Path(spec.origin).resolve()
-    stdlib = {Path(sysconfig.get_paths()[k]).resolve() for k in ("stdlib", "platstdlib")}
-    installed = {"site-packages", "dist-packages"} & set(origin.parts)
-    return not installed and any(d in origin.parents for d in stdlib)
+    """The find_package calls of the CMake files (dependency_scan.find_packages) with the keys that provide what
+    they find: a ROS package's own name, else FIND_PACKAGE_KEYS (None: unknown)."""
+    return [
+        Use(d.what, d.where, (d.name,) if d.name in ros_packages else FIND_PACKAGE_KEYS.get(d.name), d.kinds)
+        for d in find_packages(root)
+    ]
 
 
 def python_uses(root: Path, ros_packages: set[str]) -> list[Use]:
-    """The third-party imports of the package's Python files. Unknown modules get ``keys`` None; pip-only modules
-    get the pseudo-key ``pip:<distribution>``."""
-    files = python_files(root)
-    own = own_modules(files, root)
+    """The third-party imports of the package's Python files (dependency_scan.third_party_imports) but those of
+    UNDECLARED_MODULES, with their keys. Unknown modules get ``keys`` None; pip-only modules get the pseudo-key
+    ``pip:<distribution>``."""
     uses = []
-    for path in files:
-        rel = path.relative_to(root)
-        kinds = ("exec",) if rel.parts[0] in RUNTIME_TREES else ALL_KINDS
-        for module, line in imported_modules(path):
-            if module in own or module in UNDECLARED_MODULES or is_stdlib(module):
-                continue
-            if module in PIP_ONLY_MODULES:
-                keys = (f"pip:{PIP_ONLY_MODULES[module]}",)
-            else:
-                keys = (module,) if module in ros_packages else MODULE_KEYS.get(module)
-            uses.append(Use(f"import {module}", f"{rel}:{line}", keys, kinds))
+    for d in third_party_imports(root, frozenset(UNDECLARED_MODULES)):
+        if d.name in PIP_ONLY_MODULES:
+            keys = (f"pip:{PIP_ONLY_MODULES[d.name]}",)
+        else:
+            keys = (d.name,) if d.name in ros_packages else MODULE_KEYS.get(d.name)
+        uses.append(Use(d.what, d.where, keys, d.kinds))
     return uses
 
 

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from check_rosdep import imported_modules, is_stdlib, own_modules, python_files  # tools/, on the path in conftest
+from dependency_scan import imported_modules, is_stdlib, own_modules, python_files  # tools/, on the path in conftest
 
 ROOT = Path(__file__).resolve().parents[2]
 TOOL = ROOT / "tools" / "check_rosdep.py"
