@@ -8,15 +8,13 @@ import json
 import os
 import random
 import re
-import socket
-import subprocess
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 from fixtures import nginx_server
+from fixtures.python_http_server import python_http_server
 
 from grid_puzzle_localization.errors import UserError
 from grid_puzzle_localization.experiment.maps import check_store_tiles
@@ -95,29 +93,12 @@ def test_a_server_that_closes_every_connection_gets_few_requests_at_once(served,
     m, server, config = served
     assert config.max_connections > CLOSING_SERVER_CONNECTIONS
     assert MapStore(server.url("/map"), config).status.parallel_requests == config.max_connections  # keep-alive
-    port = nginx_server.free_port()
-    python = subprocess.Popen(
-        [sys.executable, "-m", "http.server", "--bind", "127.0.0.1", "--directory", str(m.dir.parent), str(port)],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    try:
-        deadline = time.monotonic() + 10.0
-        while True:
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
-                break
-            except OSError:
-                assert time.monotonic() < deadline, "python3 -m http.server did not start"
-                time.sleep(0.02)
+    with python_http_server(m.dir.parent) as port:
         config.cache_dir = str(tmp_path / "python_cache")
         store = MapStore(f"http://127.0.0.1:{port}/map", config)
         assert store.status.parallel_requests == CLOSING_SERVER_CONNECTIONS
         assert [t.error for t in store.fetch(list(m.tiles))] == [""] * 8
         assert store.status.parallel_requests == CLOSING_SERVER_CONNECTIONS
-    finally:
-        python.terminate()
-        python.wait()
     assert not keeps_alive(10, "") and keeps_alive(10, "Keep-Alive")
     assert keeps_alive(11, "") and not keeps_alive(11, "close")
 
