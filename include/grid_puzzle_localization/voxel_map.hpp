@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "grid_puzzle_localization/point_cloud.hpp"
+#include "grid_puzzle_localization/tile_geometry.hpp"  // TileKey
 
 namespace grid_puzzle_localization {
 
@@ -167,12 +168,6 @@ class VoxelMap {
 
 /// Identifier of a cloud added with NdtTarget::addTarget (for example a tile index).
 using TargetId = std::uint64_t;
-
-/// Index of a square map tile of side s [m]: tile (i, j) covers [i s, (i + 1) s) x [j s, (j + 1) s).
-struct TileKey {
-  std::int64_t i = 0, j = 0;
-  bool operator==(const TileKey& o) const { return i == o.i && j == o.j; }
-};
 
 /// Voxels along a tile side when `tile_size` is a whole multiple of `resolution` (to 1e-9 relative), else 0.
 /// Only then does every voxel lie in exactly one tile (tile-aligned voxels).

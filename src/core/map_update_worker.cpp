@@ -16,6 +16,7 @@
 #endif
 
 #include "grid_puzzle_localization/pcd_reader.hpp"
+#include "grid_puzzle_localization/tile_geometry.hpp"
 #include "thread_priority.hpp"
 
 namespace grid_puzzle_localization {
@@ -94,7 +95,7 @@ std::vector<std::string> NearestFirstTiles::take(std::size_t count, const std::o
 std::size_t TilesInFlight::within(const Eigen::Vector2d& centre, double half) const {
   std::size_t n = 0;
   for (const TileKey& key : keys) {
-    const Eigen::Vector2d low(static_cast<double>(key.i) * tile_size, static_cast<double>(key.j) * tile_size);
+    const Eigen::Vector2d low = tileLow(key, tile_size);
     const Eigen::Vector2d far = (low.array() + tile_size).matrix();
     if ((low.array() < centre.array() + half).all() && (far.array() > centre.array() - half).all()) ++n;
   }

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "grid_puzzle_localization/tile_geometry.hpp"
+
 namespace grid_puzzle_localization {
 
 GroundCells::GroundCells(const std::vector<Eigen::Vector3d>& points, double cell) : cell_(cell) {
@@ -24,8 +26,8 @@ bool GroundCells::visitNear(double x, double y, double radius, const std::functi
   const auto cy = static_cast<std::int64_t>(std::floor(y / cell_));
   for (int dy = -r; dy <= r; ++dy)
     for (int dx = -r; dx <= r; ++dx) {
-      const double ex = (static_cast<double>(cx + dx) + 0.5) * cell_ - x;
-      const double ey = (static_cast<double>(cy + dy) + 0.5) * cell_ - y;
+      const double ex = cellCentre(cx + dx, cell_) - x;
+      const double ey = cellCentre(cy + dy, cell_) - y;
       if (ex * ex + ey * ey > radius * radius) continue;
       const auto it = lowest_.find(cellKey(cx + dx, cy + dy));
       if (it != lowest_.end() && visit(it->second)) return true;

@@ -8,6 +8,7 @@
 #include <utility>
 #include <vector>
 
+#include "grid_puzzle_localization/tile_geometry.hpp"
 #include "point_cloud_msg.hpp"
 
 namespace grid_puzzle_localization {
@@ -70,7 +71,8 @@ std::optional<MapChange> TileDeltaInput::accept(const TileDelta& msg, const MapU
   }
   if (by_reference) {  // the map worker reads the files
     const double s = msg.grid_size;
-    const MapExtent window{msg.i_min * s, (msg.i_max + 1) * s, msg.j_min * s, (msg.j_max + 1) * s};
+    const MapExtent window{cellLow(msg.i_min, s), cellLow(msg.i_max + 1, s), cellLow(msg.j_min, s),
+                           cellLow(msg.j_max + 1, s)};
     return MapChange::tileFiles(s, {msg.tile_dir, msg.index_revision, msg.reset != 0, msg.added_ids, msg.removed_ids,
                                     msg.prefetch_ids, window});
   }

@@ -3,12 +3,15 @@
 #include <algorithm>
 #include <tuple>
 
+#include "grid_puzzle_localization/tile_geometry.hpp"
+
 namespace grid_puzzle_localization {
 
 void sortNearestFirst(std::vector<TileKey>& keys, double x, double y, double s) {
   const auto distance2 = [&](const TileKey& k) {
-    const double dx = (static_cast<double>(k.i) + 0.5) * s - x;
-    const double dy = (static_cast<double>(k.j) + 0.5) * s - y;
+    const Eigen::Vector2d centre = tileCentre(k, s);
+    const double dx = centre.x() - x;
+    const double dy = centre.y() - y;
     return dx * dx + dy * dy;
   };
   std::sort(keys.begin(), keys.end(), [&](const TileKey& a, const TileKey& b) {
@@ -49,8 +52,7 @@ std::optional<Served> WindowServer::onWholeMap() {
 MapExtent WindowServer::mapExtent() const {
   const TileBox b = tiles_.directory().bounds;
   const double s = tracker_.s();
-  return {static_cast<double>(b.i_min) * s, static_cast<double>(b.i_max + 1) * s, static_cast<double>(b.j_min) * s,
-          static_cast<double>(b.j_max + 1) * s};
+  return {cellLow(b.i_min, s), cellLow(b.i_max + 1, s), cellLow(b.j_min, s), cellLow(b.j_max + 1, s)};
 }
 
 bool WindowServer::touchesMap(const LostSearchRegion& region) const {
