@@ -166,9 +166,10 @@ TEST(NdtRealPair, FarPredictionsReachTheReferenceFromTheCoarseMap) {
           const gpl::NdtResult r = gpl::NdtAligner(cfg).align(*target.snapshot(), source, guess, from_coarse_map);
           const auto [te, re] = gpl::synthetic::poseError(ref, r.transform.cast<double>());
           const bool ok = r.status == gpl::NdtResultStatus::OK && te < 0.05 && re < 0.6;
-          if (from_coarse_map)
+          if (from_coarse_map) {
             EXPECT_TRUE(ok) << "along " << along << " across " << across << " yaw " << yaw << ": " << te << " m " << re
                             << " deg, " << r.message;
+          }
           const double work = r.evaluations + coarse_share * r.coarse_evaluations;
           worst[from_coarse_map] = std::max(worst[from_coarse_map], work);
           total[from_coarse_map] += work;
@@ -204,9 +205,10 @@ TEST(NdtRealPair, CoarseAlignFromTheCoarseMapLandsNearTheMinimumFromMetresOff) {
               gpl::NdtAligner(cfg).coarseAlign(*target.snapshot(), gpl::real_pair::source(), guess, from_coarse_map);
           ASSERT_TRUE(coarse.has_value());
           const auto [te, re] = gpl::synthetic::poseError(ref, coarse->matrix());
-          if (from_coarse_map)
+          if (from_coarse_map) {
             EXPECT_TRUE(te < 0.1 && re < 0.5)
                 << "along " << along << " across " << across << " yaw " << yaw << ": " << te << " m " << re << " deg";
+          }
           landed[from_coarse_map] += te < 0.1 && re < 0.5;
         }
       }
