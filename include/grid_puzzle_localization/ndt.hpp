@@ -64,6 +64,10 @@ enum class NdtResultStatus {
 };
 const char* toString(NdtResultStatus status);
 
+/// The rigid transform of an NDT result's `transform`, its rotation made orthonormal again (float round-off leaves it
+/// slightly off) so that it can be chained with other poses.
+Eigen::Isometry3d toIsometry(const Eigen::Matrix4f& m);
+
 /// Result of one alignment. All fields are finite whatever the status.
 struct NdtResult {
   Eigen::Matrix4f transform = Eigen::Matrix4f::Identity();  ///< T_target_source: maps source points into the target

@@ -30,15 +30,6 @@ const LocalizerConfig& validated(const LocalizerConfig& config) {
   return config;
 }
 
-// Float round-off in the NDT transform leaves the rotation slightly non-orthonormal; a quaternion
-// round trip fixes that before the pose is chained with others.
-Eigen::Isometry3d toIsometry(const Eigen::Matrix4f& m) {
-  Eigen::Isometry3d out = Eigen::Isometry3d::Identity();
-  out.translation() = m.topRightCorner<3, 1>().cast<double>();
-  out.linear() = Eigen::Quaterniond(m.topLeftCorner<3, 3>().cast<double>()).normalized().toRotationMatrix();
-  return out;
-}
-
 // Right after a start or a recovery no velocity is measured. When the motion bound keeps the scan within this many
 // NDT voxels of the last accepted pose (the coarse stage's basin, with a margin), the match from that pose is tried
 // before the branch-and-bound search: 0.2 s after a start at the default max_speed the bound is 4 m.

@@ -35,6 +35,13 @@ const char* toString(NdtSearchMethod method) {
   return "?";
 }
 
+Eigen::Isometry3d toIsometry(const Eigen::Matrix4f& m) {
+  Eigen::Isometry3d out = Eigen::Isometry3d::Identity();
+  out.translation() = m.topRightCorner<3, 1>().cast<double>();
+  out.linear() = Eigen::Quaterniond(m.topLeftCorner<3, 3>().cast<double>()).normalized().toRotationMatrix();
+  return out;
+}
+
 const char* toString(NdtResultStatus status) {
   switch (status) {
     case NdtResultStatus::OK:
