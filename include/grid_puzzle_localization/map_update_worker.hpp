@@ -67,17 +67,24 @@ struct MapChange {
 TileKey tileKeyOfStem(const std::string& stem, double grid_size);
 
 /// The tiles of a change still to load, handed out nearest first: each take() sorts what is left by the distance of
-/// its tile's centre from the newest focus (the predicted position), so a pose that moves on while a large change
-/// loads (a slow map store) still gets the tiles under its scans first. Without a focus, the change's own order (the
+/// its tile's centre from the newest focus (the predicted position) along the farther axis (max |dx|, |dy|), so a pose
+/// that moves on while a large change loads (a slow map store) still gets the tiles under its scans first, in growing
+/// squares: the squares about the pose that the localizer waits for (map_wait_half_side) are whole as early as they can
+/// be, not after the circle that reaches their corners. Without a focus, the change's own order (the
 /// provider's: nearest the pose it served). Ids that are not tile names go last; loading them reports why.
 class NearestFirstTiles {
  public:
   NearestFirstTiles(const std::vector<std::string>& ids, double grid_size);
   /// The next `count` ids (fewer at the end), nearest `focus` [m, map frame] first; ties keep their order.
   std::vector<std::string> take(std::size_t count, const std::optional<Eigen::Vector2d>& focus);
+  /// Adds `ids` after those left (a change that joins while these load).
+  void add(const std::vector<std::string>& ids);
+  /// Drops those of `ids` still left (tiles that left the window before they were loaded).
+  void remove(const std::vector<std::string>& ids);
   bool empty() const { return left_.empty(); }
 
  private:
+  double grid_size_;
   struct Tile {
     std::string id;
     Eigen::Vector2d centre;  // [m]; NaN when the id is not a tile name
@@ -209,6 +216,9 @@ class MapUpdateWorker {
   MapStore& storeAt(const std::string& url, const std::string& revision);
   // The window tiles of `batch` not loaded yet (in_flight_), before it is applied.
   void planInFlight(const std::deque<MapChange>& batch);
+  // Takes the changes queued next that can join a change of tile files from `change`'s directory and revision with
+  // tiles of `grid_size` [m] while it loads (tile files of the same source, no reset), into joined_; returns them.
+  std::deque<MapChange> takeJoining(double grid_size, const TileFileChange& change);
   void landed(const std::string& id);  // a tile left in_flight_: folded in, or failed
   TilesInFlight inFlight() const;      // in_flight_ as published
   void announceInFlight();             // publishes in_flight_ without a new map; mutex_ not held
@@ -252,6 +262,7 @@ class MapUpdateWorker {
   std::optional<Eigen::Vector2d> focus_;   // guarded by mutex_: the newest predicted position
   std::unordered_map<std::string, TileKey> in_flight_;  // worker thread only: window tiles not loaded yet, by id
   double in_flight_size_ = 0.0;                         // worker thread only: their tile side [m]
+  std::deque<MapChange> joined_;                        // worker thread only: changes that joined the batch applied
   std::chrono::steady_clock::time_point published_;     // worker thread only: when the last snapshot went out
   MapUpdateStats totals_;                               // worker thread only: the by-reference totals of stats_
   std::thread worker_;

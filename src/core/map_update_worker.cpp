@@ -62,13 +62,17 @@ TileKey tileKeyOfStem(const std::string& stem, double grid_size) {
   return {static_cast<std::int64_t>(std::floor(cx / grid_size)), static_cast<std::int64_t>(std::floor(cy / grid_size))};
 }
 
-NearestFirstTiles::NearestFirstTiles(const std::vector<std::string>& ids, double grid_size) {
-  left_.reserve(ids.size());
+NearestFirstTiles::NearestFirstTiles(const std::vector<std::string>& ids, double grid_size) : grid_size_(grid_size) {
+  add(ids);
+}
+
+void NearestFirstTiles::add(const std::vector<std::string>& ids) {
+  left_.reserve(left_.size() + ids.size());
   for (const std::string& id : ids) {
     Eigen::Vector2d centre = Eigen::Vector2d::Constant(std::numeric_limits<double>::quiet_NaN());
     try {
-      const TileKey key = tileKeyOfStem(id, grid_size);
-      centre = {(static_cast<double>(key.i) + 0.5) * grid_size, (static_cast<double>(key.j) + 0.5) * grid_size};
+      const TileKey key = tileKeyOfStem(id, grid_size_);
+      centre = tileCentre(key, grid_size_);
     } catch (const std::invalid_argument&) {
       // Reported when the tile is loaded.
     }
@@ -76,10 +80,16 @@ NearestFirstTiles::NearestFirstTiles(const std::vector<std::string>& ids, double
   }
 }
 
+void NearestFirstTiles::remove(const std::vector<std::string>& ids) {
+  const std::unordered_set<std::string> leaving(ids.begin(), ids.end());
+  left_.erase(std::remove_if(left_.begin(), left_.end(), [&](const Tile& t) { return leaving.count(t.id) > 0; }),
+              left_.end());
+}
+
 std::vector<std::string> NearestFirstTiles::take(std::size_t count, const std::optional<Eigen::Vector2d>& focus) {
   if (focus) {
     const auto distance = [&](const Tile& t) {
-      return t.centre.allFinite() ? (t.centre - *focus).squaredNorm() : std::numeric_limits<double>::infinity();
+      return t.centre.allFinite() ? (t.centre - *focus).cwiseAbs().maxCoeff() : std::numeric_limits<double>::infinity();
     };
     std::stable_sort(left_.begin(), left_.end(),
                      [&](const Tile& a, const Tile& b) { return distance(a) < distance(b); });
@@ -427,6 +437,22 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
   // batch is one round.
   std::size_t batch_size = store ? fetchRound(*store) : kTileFetchBatch;
   while (!left.empty()) {
+    // Changes of this source queued meanwhile (the window moved on while this one loads) join it: what leaves goes
+    // now, loaded or not, and what enters joins the tiles still to load, nearest the focus first. What the vehicle
+    // needs next does not wait behind the rest of this change, and is known to be in flight at once.
+    const std::deque<MapChange> joining = takeJoining(grid_size, change);
+    if (!joining.empty()) {
+      fold();  // a tile read but not folded yet may be leaving
+      planInFlight(joining);
+      for (const MapChange& next : joining) {
+        removeTiles(target, next.files.removed);
+        left.remove(next.files.removed);
+        left.add(next.files.added);
+        window_ = next.files.window;
+        prefetch_.assign(next.files.prefetch.rbegin(), next.files.prefetch.rend());
+      }
+      announceInFlight();
+    }
     const std::vector<std::string> chunk = left.take(batch_size, focus());
     if (store) {
       std::vector<std::string> batch;
@@ -504,6 +530,23 @@ void MapUpdateWorker::planInFlight(const std::deque<MapChange>& batch) {
     else
       for (const std::string& id : change.files.added) enter(id, change.grid_size);
   }
+}
+
+std::deque<MapChange> MapUpdateWorker::takeJoining(double grid_size, const TileFileChange& change) {
+  std::deque<MapChange> out;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    while (!queue_.empty()) {
+      const MapChange& next = queue_.front();
+      if (next.kind != MapChange::Kind::kTileFiles || next.grid_size != grid_size || next.files.reset ||
+          next.files.dir != change.dir || next.files.index_revision != change.index_revision)
+        break;
+      out.push_back(std::move(queue_.front()));
+      queue_.pop_front();
+    }
+  }
+  joined_.insert(joined_.end(), out.begin(), out.end());
+  return out;
 }
 
 void MapUpdateWorker::landed(const std::string& id) { in_flight_.erase(id); }
@@ -672,7 +715,11 @@ void MapUpdateWorker::run() {
         for (const TileCloud& tile : change.added) landed(tile.id);
         for (const std::string& id : change.files.added) landed(id);
       }
-      publish(target, false, msSince(start), batch.size(), failures);
+      for (const MapChange& change : joined_)
+        for (const std::string& id : change.files.added) landed(id);
+      const std::size_t changes = batch.size() + joined_.size();
+      joined_.clear();
+      publish(target, false, msSince(start), changes, failures);
     }
 
     lock.lock();

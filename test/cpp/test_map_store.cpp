@@ -482,6 +482,7 @@ TEST_F(MapWorkerOverHttp, ATileDirectoryByUrlGivesTheTargetOfTheLocalDirectoryAn
   gpl::MapUpdateWorker remote(params), local(params);
   remote.setMapStoreConfig(config_);
   remote.submit(fileChange(url, world_.revision(), true, first));
+  remote.waitIdle();  // the second change would otherwise join the first, and its leaving tiles go unfetched
   remote.submit(fileChange(url, world_.revision(), false, enter, leave));
   local.submit(fileChange(world_.root + "/map", "r", true, first));
   local.submit(fileChange(world_.root + "/map", "r", false, enter, leave));
@@ -603,7 +604,7 @@ TEST_F(MapWorkerOverHttp, ASlowWindowIsPublishedAsItArrivesNearestTheFocusFirstW
   double farthest_held = 0.0, nearest_flying = std::numeric_limits<double>::infinity();
   for (const std::string& id : world_.ids) {
     const gpl::TileKey k = gpl::tileKeyOfStem(id, 2.0);
-    const double d = (Eigen::Vector2d(2.0 * k.i + 1.0, 2.0 * k.j + 1.0) - focus).norm();
+    const double d = (Eigen::Vector2d(2.0 * k.i + 1.0, 2.0 * k.j + 1.0) - focus).cwiseAbs().maxCoeff();
     if (flying.count({k.i, k.j})) {
       nearest_flying = std::min(nearest_flying, d);
     } else {
@@ -626,6 +627,58 @@ TEST_F(MapWorkerOverHttp, ASlowWindowIsPublishedAsItArrivesNearestTheFocusFirstW
   local.submit(fileChange(world_.root + "/map", "r", true, world_.ids));
   local.waitIdle();
   expectSameVoxels(*latest->map, *local.takeReady());
+}
+
+// The window moves on while a slow window loads: the change joins the one loading. Its leaving tiles not fetched yet
+// are never fetched, its entering ones are in flight at once, and the map ends as the final window read from disk.
+TEST_F(MapWorkerOverHttp, AChangeQueuedWhileASlowWindowLoadsJoinsIt) {
+  const gpl_test::DelayProxyServer slow(server_->port(), 300.0);
+  gpl::MapUpdateWorker worker{gpl::VoxelMapParams()};
+  worker.setMapStoreConfig(config_);
+  const std::size_t half = world_.ids.size() / 2;
+  const std::vector<std::string> first(world_.ids.begin(), world_.ids.begin() + half);
+  const std::vector<std::string> entering(world_.ids.begin() + half, world_.ids.end());
+  // Nearest the focus first: the tiles farthest from it are the last of the first window to be fetched.
+  const Eigen::Vector2d focus = gpl::tileCentre(gpl::tileKeyOfStem(first.front(), 2.0), 2.0);
+  worker.setFocus(focus);
+  std::vector<std::string> by_distance = first;
+  std::sort(by_distance.begin(), by_distance.end(), [&](const std::string& a, const std::string& b) {
+    return (gpl::tileCentre(gpl::tileKeyOfStem(a, 2.0), 2.0) - focus).norm() <
+           (gpl::tileCentre(gpl::tileKeyOfStem(b, 2.0), 2.0) - focus).norm();
+  });
+  const std::vector<std::string> leaving(by_distance.end() - static_cast<std::ptrdiff_t>(half / 4), by_distance.end());
+  worker.submit(fileChange(slow.url("/map"), world_.revision(), true, first));
+  // Once the first window is loading (announced in flight), the window moves on.
+  std::optional<gpl::MapSnapshot> s;
+  while (!(s = worker.takeSnapshot())) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  worker.submit(fileChange(slow.url("/map"), world_.revision(), false, entering, leaving));
+  bool entering_in_flight = false;
+  std::shared_ptr<const gpl::VoxelMap> map;
+  const gpl::TileKey entering_key = gpl::tileKeyOfStem(entering.front(), 2.0);
+  const auto take = [&] {
+    if (!(s = worker.takeSnapshot())) return;
+    for (const gpl::TileKey& f : s->in_flight.keys) entering_in_flight = entering_in_flight || f == entering_key;
+    if (s->map) map = s->map;
+  };
+  while (worker.busy()) {
+    take();
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  worker.waitIdle();
+  take();
+  EXPECT_EQ(worker.takeErrors(), std::vector<std::string>());
+  EXPECT_TRUE(entering_in_flight) << "the joining change's tiles were never announced in flight while loading";
+  // 2 s of fetching at 300 tiles/s: the farthest quarter of the first window had not been fetched when it left.
+  EXPECT_EQ(worker.stats().map_store_fetched, world_.ids.size() - leaving.size());
+  std::vector<std::string> final_window;
+  for (const std::string& id : world_.ids)
+    if (std::find(leaving.begin(), leaving.end(), id) == leaving.end()) final_window.push_back(id);
+  gpl::MapUpdateWorker local{gpl::VoxelMapParams()};
+  local.submit(fileChange(world_.root + "/map", "r", true, final_window));
+  local.waitIdle();
+  ASSERT_TRUE(map);
+  expectSameVoxels(*map, *local.takeReady());
+  EXPECT_EQ(worker.stats().tiles, final_window.size());
 }
 
 TEST_F(MapWorkerOverHttp, AStartOnASlowStoreWaitsForTheTilesAroundItAndIsNotLostMeanwhile) {

@@ -272,19 +272,21 @@ TEST(MapUpdateWorker, TheWorkerThreadIsNicerThanTheScanThread) {
 
 namespace {
 
-// Squared distances of `ids`' tile centres from `focus` [m^2].
-std::vector<double> distances2(const std::vector<std::string>& ids, const Eigen::Vector2d& focus, double s) {
+// Distances of `ids`' tile centres from `focus` along the farther axis [m]: the half side of the smallest square about
+// the focus that holds the centre.
+std::vector<double> squareDistances(const std::vector<std::string>& ids, const Eigen::Vector2d& focus, double s) {
   std::vector<double> out;
   for (const std::string& id : ids) {
     const gpl::TileKey k = gpl::tileKeyOfStem(id, s);
-    out.push_back((Eigen::Vector2d((k.i + 0.5) * s, (k.j + 0.5) * s) - focus).squaredNorm());
+    const Eigen::Vector2d d = Eigen::Vector2d((k.i + 0.5) * s, (k.j + 0.5) * s) - focus;
+    out.push_back(std::max(std::abs(d.x()), std::abs(d.y())));
   }
   return out;
 }
 
 }  // namespace
 
-TEST(NearestFirstTiles, EachBatchHoldsTheTilesNearestTheMovingFocus) {
+TEST(NearestFirstTiles, EachBatchHoldsTheTilesNearestTheMovingFocusInGrowingSquares) {
   // A 21 x 21 window of 2 m tiles named in (i, j) order, as a delta lists them; the focus (the predicted position)
   // drives diagonally across it while the batches are taken.
   const double s = 2.0;
@@ -298,10 +300,10 @@ TEST(NearestFirstTiles, EachBatchHoldsTheTilesNearestTheMovingFocus) {
     const Eigen::Vector2d focus(-15.0 + 4.0 * step, -12.0 + 3.0 * step);
     const std::vector<std::string> batch = tiles.take(gpl::kTileFetchBatch, focus);
     // Closed form: the batch's distances are the smallest of what was left, in ascending order.
-    std::vector<double> expected = distances2(left, focus, s);
+    std::vector<double> expected = squareDistances(left, focus, s);
     std::sort(expected.begin(), expected.end());
     expected.resize(std::min(gpl::kTileFetchBatch, left.size()));
-    EXPECT_EQ(distances2(batch, focus, s), expected) << "batch " << step << " at " << focus.transpose();
+    EXPECT_EQ(squareDistances(batch, focus, s), expected) << "batch " << step << " at " << focus.transpose();
     for (const std::string& id : batch) left.erase(std::find(left.begin(), left.end(), id));
     taken += batch.size();
   }
