@@ -23,6 +23,7 @@
 #include "grid_puzzle_localization/pose_prediction.hpp"
 #include "grid_puzzle_localization/pose_search.hpp"
 #include "grid_puzzle_localization/preprocess.hpp"
+#include "grid_puzzle_localization/scan_odometry.hpp"
 
 namespace grid_puzzle_localization {
 
@@ -115,9 +116,9 @@ struct LocalizerConfig {
     return c;
   }();
   double time_jump_back = 0.5;  ///< [s] a scan this much older than the last one resets the localizer
-  /// [m] > 0: with a window of tiles that is still arriving (a slow map store), a start, a search and a failed match
-  /// wait for the window's tiles in flight within the square of this half side around the pose (a search: around
-  /// its region) instead of running on a partial map or counting as lost.
+  /// [m] > 0: with a window of tiles that is still arriving (a slow map store), a start, a search, a track and a
+  /// failed match wait for the window's tiles in flight within the square of this half side around the pose (a search:
+  /// around its region) instead of running on a partial map or counting as lost.
   double map_wait_half_side = 20.0;
   bool output_aligned = false;  ///< fill LocalizerOutput::aligned (costs a copy per scan)
 
@@ -134,6 +135,9 @@ GlobalLocalizationConfig globalSearchConfig(const LocalizerConfig& config);
 struct StartSearch {
   GlobalLocalizationResult search;  ///< found: the start was taken
   bool held = false;                ///< the search answered and its answer is held for the next one to confirm
+  /// The search did not run: this many tiles of its region are still in flight (on a window still arriving it would
+  /// call the place ambiguous, or find a look-alike). It is asked for again later.
+  std::size_t tiles_awaited = 0;
 };
 
 enum class LocalizerState { kWaitingForMap, kWaitingForInitialPose, kTracking };
@@ -147,8 +151,17 @@ struct LocalizerOutput {
   /// Valid when state == kTracking: map_T_base at the scan stamp, always finite.
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
   /// The prediction the match started from (map_T_base): the constant-velocity one while it is trusted,
-  /// else the last accepted pose (rotated by the gyro when it covers the interval).
+  /// else the last accepted pose (rotated by the gyro when it covers the interval). While a given start waits for
+  /// its map (start_pending): that start, carried to this scan.
   Eigen::Isometry3d prediction = Eigen::Isometry3d::Identity();
+  /// Waiting for the map with a given start (initial pose): the vehicle may drive on meanwhile, so the start is
+  /// carried by the scans' own motion (ScanOdometry, each scan matched against the one before) and is matched where
+  /// the vehicle is once the tiles around it have arrived. Tiles load nearest it first; a provider's window should
+  /// follow it.
+  bool start_pending = false;
+  /// A step of that motion was not measured (two scans that did not match): the start is then not known to the
+  /// NDT's reach, and is searched around (lost/initial_pose_search_size) instead of matched from.
+  bool start_motion_guessed = false;
   Twist twist = Twist::Zero();  ///< body twist (base frame) [m/s, rad/s]
   /// Of the pose, in ROS's order and frames: x y z in the map frame, then rotation about the map's fixed
   /// X Y Z axes (a perturbation R' = exp(dtheta) R) [m^2, rad^2]. Grows with the time since the last
@@ -246,8 +259,8 @@ class Localizer {
   /// meanwhile, each reported waiting for a pose (not queued behind the search), and the first scan after it
   /// finishes judges its answer (LocalizerOutput::start_search). The search's work budget
   /// (GlobalLocalizationConfig::max_poses) bounds its time. Without background_search it is searchForStart. Returns
-  /// the judged answer when it searched within the call, nullopt when the search runs beside (or one already runs: it
-  /// is not started twice). Scan thread only.
+  /// the judged answer when it searched within the call or did not search (StartSearch::tiles_awaited), nullopt when
+  /// the search runs beside (or one already runs: it is not started twice). Scan thread only.
   std::optional<StartSearch> startSearchForStart(const SearchRegion& region);
   /// A search started by this localizer (a start's, a recovery's) is still running. Scan thread only.
   bool searching() const { return search_.has_value(); }
@@ -274,6 +287,18 @@ class Localizer {
 
  private:
   bool acceptable(const NdtResult& r) const;
+  /// Holds `map_T_base` (none: nothing) as the start of the next scan, with no motion carried yet (the vehicle's body
+  /// twist `velocity` [m/s, rad/s] until one is measured), its tiles first.
+  void holdStart(const std::optional<Eigen::Isometry3d>& map_T_base, const Twist& velocity = Twist::Zero());
+  /// source_ from `scan`, not deskewed (no motion is known), in the base frame.
+  void prepareUndeskewed(const PointCloud& scan, const Eigen::Isometry3d& base_T_sensor, double stamp,
+                         LocalizerOutput& out);
+  /// Carries the held start by the motion from the last scan to source_ (the scan at `stamp`), and loads its tiles
+  /// first.
+  void carryStart(double stamp, LocalizerOutput& out);
+  /// Ends the track, if any, and reports this scan waiting for `awaited` tiles of the map, the held start carried to
+  /// it (holdStart first).
+  void waitForMapCarried(double stamp, std::size_t awaited, LocalizerOutput& out);
   /// The branch-and-bound search of `region` on the current source and target (the map given to it first
   /// when the target changed); found only when its refinement also passes the match gate.
   GlobalLocalizationResult searchGlobally(const GlobalSearchRequest& request);
@@ -326,7 +351,9 @@ class Localizer {
   Preprocessor preprocessor_;
   PointCloud source_;  // the preprocessed scan in base_link, reused between scans
   NdtAligner aligner_;
-  NdtAligner carried_aligner_;  // aligner_ with at most kCarriedMatchIterations (localizer.cpp)
+  NdtAligner carried_aligner_;         // aligner_ with at most kCarriedMatchIterations (localizer.cpp)
+  ScanOdometry start_odometry_;        // carries pending_initial_pose_ while its map arrives
+  bool start_motion_guessed_ = false;  // a step of that motion was not measured
   MapUpdateWorker worker_;
   std::shared_ptr<const VoxelMap> target_;
   TilesInFlight in_flight_;  // the window's tiles target_ does not hold yet

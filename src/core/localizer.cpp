@@ -18,6 +18,16 @@ double msSince(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
+// The scan-to-scan odometry that carries a start while its map arrives: the matching's settings on voxels wide enough
+// to hold several of the downsampled scan's points (4 leaves a side: a surface crossing one holds about 16), one
+// thread (the scan thread's).
+NdtConfig startOdometryConfig(const LocalizerConfig& config) {
+  NdtConfig c = config.ndt;
+  c.resolution = std::max(config.ndt.resolution, 4.0 * config.preprocess.voxel_size);
+  c.threads = 1;
+  return c;
+}
+
 VoxelMapParams workerParams(const LocalizerConfig& config) {
   VoxelMapParams p = config.ndt;
   p.threads = config.map_update_threads;
@@ -97,15 +107,50 @@ Localizer::Localizer(const LocalizerConfig& config)
       preprocessor_(config.preprocess),
       aligner_(config.ndt),
       carried_aligner_(carriedMatchConfig(config.ndt)),
+      start_odometry_(startOdometryConfig(config), config.match.min_nvtl, config.prediction.max_speed),
       worker_(workerParams(config)),
       fusion_(config.fusion),
       global_(globalSearchConfig(config)) {}
 
-void Localizer::setInitialPose(const Eigen::Isometry3d& map_T_base) { pending_initial_pose_ = map_T_base; }
+void Localizer::setInitialPose(const Eigen::Isometry3d& map_T_base) { holdStart(map_T_base); }
 
 void Localizer::setDefaultInitialPose(const Eigen::Isometry3d& map_T_base) {
   default_initial_pose_ = map_T_base;
-  if (!predictor_.initialized()) pending_initial_pose_ = map_T_base;
+  if (!predictor_.initialized()) holdStart(map_T_base);
+}
+
+void Localizer::holdStart(const std::optional<Eigen::Isometry3d>& map_T_base, const Twist& velocity) {
+  pending_initial_pose_ = map_T_base;
+  start_odometry_.reset(velocity);
+  start_motion_guessed_ = false;
+  if (map_T_base) worker_.setFocus(map_T_base->translation().head<2>());  // its tiles first
+}
+
+void Localizer::prepareUndeskewed(const PointCloud& scan, const Eigen::Isometry3d& base_T_sensor, double stamp,
+                                  LocalizerOutput& out) {
+  preprocessor_.apply(scan, source_, &out.preprocess);
+  const Eigen::Isometry3f base_T_sensor_f = base_T_sensor.cast<float>();
+  for (Point& p : source_) p = base_T_sensor_f * p;
+  source_stamp_ = stamp;
+}
+
+void Localizer::carryStart(double stamp, LocalizerOutput& out) {
+  OdometryStep step = OdometryStep::kFirst;
+  const Eigen::Isometry3d motion = start_odometry_.add(stamp, source_, &step);
+  *pending_initial_pose_ = *pending_initial_pose_ * motion;
+  start_motion_guessed_ = start_motion_guessed_ || step == OdometryStep::kGuessed;
+  out.prediction = *pending_initial_pose_;
+  out.start_pending = true;
+  out.start_motion_guessed = start_motion_guessed_;
+  worker_.setFocus(out.prediction.translation().head<2>());
+}
+
+void Localizer::waitForMapCarried(double stamp, std::size_t awaited, LocalizerOutput& out) {
+  predictor_ = PosePredictor();
+  ++track_version_;
+  carryStart(stamp, out);
+  out.state = LocalizerState::kWaitingForMap;
+  out.tiles_awaited = awaited;
 }
 
 void Localizer::addGyro(double stamp, const Eigen::Vector3d& angular_velocity) {
@@ -121,7 +166,7 @@ void Localizer::reset() {
   predictor_ = PosePredictor();
   fusion_.reset();
   gyro_.clear();
-  pending_initial_pose_ = default_initial_pose_;
+  holdStart(default_initial_pose_);
   last_twist_.reset();
   last_stamp_.reset();
   source_stamp_.reset();
@@ -293,6 +338,13 @@ Localizer::StartSearch Localizer::searchForStart(const SearchRegion& region) {
 }
 
 std::optional<StartSearch> Localizer::startSearchForStart(const SearchRegion& region) {
+  // On a window still arriving the search would call the place ambiguous, or find a look-alike: it waits.
+  if (const std::size_t awaited = tilesAwaited(region.centre.translation().head<2>(), region.radius)) {
+    StartSearch waiting;
+    waiting.tiles_awaited = awaited;
+    waiting.search.reason = "waits for " + std::to_string(awaited) + " tiles of its region still loading";
+    return waiting;
+  }
   if (!config_.lost.background_search) return searchForStart(region);
   if (search_) return std::nullopt;
   if (!target_ || target_->gaussianCount() == 0 || !source_stamp_) {
@@ -479,25 +531,35 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     out.target_points = target_->pointCount();
   }
   out.tiles_in_flight = in_flight_.keys.size();
-  // A given pose is matched from once the tiles around it have arrived: a partial map could fit the scan elsewhere.
+  // A given pose is matched from once the tiles around it have arrived: a partial map could fit the scan elsewhere. It
+  // is matched moved on to this scan by its carried velocity: the tiles around that place.
   if (pending_initial_pose_)
-    out.tiles_awaited = tilesAwaited(pending_initial_pose_->translation().head<2>(), config_.map_wait_half_side);
+    out.tiles_awaited = tilesAwaited((*pending_initial_pose_ * start_odometry_.motionTo(stamp)).translation().head<2>(),
+                                     config_.map_wait_half_side);
   if (!target_ || target_->gaussianCount() == 0 || out.tiles_awaited > 0) {
+    // The vehicle may drive on meanwhile: the start goes with it.
+    if (pending_initial_pose_) {
+      prepareUndeskewed(scan, base_T_sensor, stamp, out);
+      carryStart(stamp, out);
+    }
     out.state = LocalizerState::kWaitingForMap;
     out.scan_ms = msSince(start);
     return out;
   }
-  const bool fresh = pending_initial_pose_.has_value();
-  if (fresh) startFrom(*pending_initial_pose_, stamp, predictionCovariance(config_.covariance), 0.0);
+  const std::optional<Eigen::Isometry3d> given_start = pending_initial_pose_;
+  const bool fresh = given_start.has_value();
+  // A start carried while its map arrived moves on at the carried velocity from its last scan to this one.
+  if (fresh) {
+    startFrom(*given_start * start_odometry_.motionTo(stamp), stamp, predictionCovariance(config_.covariance), 0.0);
+    // Its motion is the vehicle's: the next scan is matched from the start moved on by it first, as after a recovery.
+    if (!start_odometry_.velocity().isZero()) last_twist_ = start_odometry_.velocity();
+  }
   // A start search beside the scan thread that has finished is judged; a confirmed answer starts the track, and this
   // scan is matched from it.
   if (!predictor_.initialized()) out.start_search = takeStartSearch();
   if (!predictor_.initialized()) {
     // Kept (not deskewed: no motion is known) for a global search started while waiting.
-    preprocessor_.apply(scan, source_, &out.preprocess);
-    const Eigen::Isometry3f base_T_sensor_f = base_T_sensor.cast<float>();
-    for (Point& p : source_) p = base_T_sensor_f * p;
-    source_stamp_ = stamp;
+    prepareUndeskewed(scan, base_T_sensor, stamp, out);
     out.state = LocalizerState::kWaitingForInitialPose;
     out.scan_ms = msSince(start);
     return out;
@@ -542,6 +604,22 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
       boundedSearchRegion(held, fresh ? 0.0 : elapsed, motion_seen_, rotation_known, config_.prediction);
 
   out.prediction = guess;
+  // The map under the scan is still arriving (a slow map store the vehicle outran): a match on the part that has
+  // arrived can slide along where the rest is missing and still pass the gate. The track waits instead, carried like
+  // a start by the scans' own motion from this scan on, and is matched where the vehicle is once those tiles are in.
+  if (!fresh) {
+    const std::size_t ahead = tilesAwaited(guess.translation().head<2>(), config_.map_wait_half_side);
+    if (ahead > 0) {
+      // Carried from where the vehicle is: the prediction, or right after a start or a recovery (no velocity measured
+      // yet) the last accepted pose moved on by the last measured motion, which the start's own carry measured.
+      const bool carried = !velocity_trusted && last_twist_;
+      holdStart(carried ? Eigen::Isometry3d(predictor_.pose() * expTwist(*last_twist_, elapsed)) : guess,
+                velocity_trusted ? predictor_.smoothedTwist() : last_twist_.value_or(Twist::Zero()));
+      waitForMapCarried(stamp, ahead, out);
+      out.scan_ms = msSince(start);
+      return out;
+    }
+  }
   const Clock::time_point align_start = Clock::now();
   // A match is poor when it fails the gate or scores well below the last accepted one (a false minimum
   // can pass an absolute gate): then the hypotheses and, failing them, the search get a chance.
@@ -555,8 +633,10 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     if (r && acceptable(*r) && reach.holds(toIsometry(r->transform)) && (!best || r->nvtl > best->nvtl))
       best = std::move(r);
   };
-  if (fresh) {
-    // A pose given by the user (rviz, a parameter) is matched from as given, the search only when that fails.
+  if (fresh && !start_motion_guessed_) {
+    // A pose given by the user (rviz, a parameter) is matched from as given (carried by the scans' own motion while
+    // its map arrived), the search only when that fails. When that motion was not measured throughout (scans that did
+    // not match each other), the start is not known to the NDT's reach: the search of its square decides.
     out.ndt = aligner_.align(*target_, source_, guess.cast<float>());
     consider(out.ndt);
   } else if (velocity_trusted) {
@@ -659,17 +739,15 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   if (!out.match_accepted && start_map_loading) {
     // The map around a new initial pose may still be loading (a window of tiles arrives over the first scans): the
     // pose is kept for the next scan instead of being searched from as a lost track.
-    pending_initial_pose_ = predictor_.pose();
-    predictor_ = PosePredictor();
-    ++track_version_;
-    out.state = LocalizerState::kWaitingForMap;
-    out.tiles_awaited = start_awaited;
+    pending_initial_pose_ = given_start;
+    waitForMapCarried(stamp, start_awaited, out);
     out.scan_ms = msSince(start);
     return out;
   }
   if (!out.match_accepted) out.tiles_awaited = awaited;
   out.lost = !out.match_accepted && awaited == 0;
   if (fresh && out.lost) start_refused_ = true;
+  if (fresh && (out.match_accepted || out.lost)) holdStart(std::nullopt);  // the start is taken or refused
   if (out.lost) out.search_region = region;
   out.since_last_match = fresh ? 0.0 : elapsed;
   if (out.match_accepted) {
@@ -711,6 +789,8 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     out.aligned.reserve(source_.size());
     for (const Point& p : source_) out.aligned.push_back(map_T_base * p);
   }
+  // Tiles still loading go nearest the pose the next scans will be matched around first.
+  worker_.setFocus(out.prediction.translation().head<2>());
   out.scan_ms = msSince(start);
   return out;
 }

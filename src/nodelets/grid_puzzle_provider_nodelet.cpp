@@ -98,7 +98,8 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
     } else {
       pose_sub_ = nh.subscribe("pose", 1, &GridPuzzleProviderNodelet::onPose, this);
     }
-    if (config_.lost_max_half_side > 0.0)
+    // The localizer's status: a start it carries while the start's map arrives, and the region it searches when lost.
+    if (config_.pose_source == "odom" || config_.lost_max_half_side > 0.0)
       status_sub_ = nh.subscribe("localizer_status", 1, &GridPuzzleProviderNodelet::onLocalizerStatus, this);
     hint_sub_ = nh.subscribe("initialpose_hint", 1, &GridPuzzleProviderNodelet::onHint, this);
     saved_pose_ = std::make_unique<SavedPoseWriter>(nh, pnh, config_.save_pose_rate);
@@ -135,6 +136,16 @@ class GridPuzzleProviderNodelet : public nodelet::Nodelet {
   }
 
   void onLocalizerStatus(const NdtStatus::ConstPtr& msg) {
+    // A start the localizer carries while its map arrives (the vehicle drives on): the window goes with it.
+    if (msg->start_pending && config_.pose_source == "odom") {
+      PoseSample start;
+      start.x = msg->start_x;
+      start.y = msg->start_y;
+      start.t = msg->header.stamp.toSec();
+      start.yaw = msg->start_yaw;
+      offer(start);
+    }
+    if (config_.lost_max_half_side <= 0.0) return;
     {
       std::lock_guard<std::mutex> lock(input_mutex_);
       // The window grows for a search only once its tiles have all arrived: a growth queued behind a window still

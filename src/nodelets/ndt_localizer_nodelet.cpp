@@ -59,10 +59,7 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       NODELET_FATAL("%s: %s", getName().c_str(), e.what());
       throw;
     }
-    if (params_.initial_pose) {
-      localizer_->setDefaultInitialPose(*params_.initial_pose);
-      localizer_->map().setFocus(params_.initial_pose->translation().head<2>());
-    }
+    if (params_.initial_pose) localizer_->setDefaultInitialPose(*params_.initial_pose);
     // Consumed: a respawned process must not start again from the launch's pose (the vehicle has moved on);
     // it waits for initialpose or searches around the pose it saved in ~last_pose (global_localization/*).
     if (params_.initial_pose) pnh.deleteParam("initial_pose");
@@ -157,7 +154,6 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       return;
     }
     localizer_->setInitialPose(pose);
-    localizer_->map().setFocus(pose.translation().head<2>());  // its tiles first
     NODELET_INFO("initial pose set to (%.2f, %.2f, %.2f)", pose.translation().x(), pose.translation().y(),
                  pose.translation().z());
   }
@@ -256,8 +252,6 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
       publish(out, msg->header);  // the status says why it waits; nothing else goes out
       return;
     }
-    // Tiles still loading go nearest the pose the next scans will be matched around first.
-    localizer_->map().setFocus(out.prediction.translation().head<2>());
     if (out.recovered)
       NODELET_WARN("recovered: matching again after %.1f s without an accepted match%s", out.since_last_match,
                    out.global_search ? " (global search)" : "");
@@ -301,14 +295,12 @@ class NdtLocalizerNodelet : public nodelet::Nodelet {
     if (hinted) last_hint_search_ = t;
     const std::optional<SearchRegion> region = requestedRegion(req);
     if (!region) return false;  // no map yet
-    // On a window still arriving the search would call the place ambiguous, or find a look-alike: it waits.
-    const std::size_t awaited = localizer_->tilesAwaited(region->centre.translation().head<2>(), region->radius);
-    if (awaited > 0) {
-      NODELET_INFO_THROTTLE(2.0, "global localization waits for %zu tiles of its region still loading", awaited);
-      return false;
-    }
     const std::optional<StartSearch> start = localizer_->startSearchForStart(*region);
     if (!start) return false;  // runs beside the scan thread
+    if (start->tiles_awaited > 0) {
+      NODELET_INFO_THROTTLE(2.0, "global localization %s", start->search.reason.c_str());
+      return false;
+    }
     reportStartSearch(*start, t);
     return start->search.found;
   }

@@ -1,5 +1,7 @@
 #include "ndt_status_msg.hpp"
 
+#include <cmath>
+
 namespace grid_puzzle_localization {
 
 NdtStatus toStatusMsg(const LocalizerOutput& out, const std_msgs::Header& header, const MapUpdateStats& map,
@@ -9,6 +11,13 @@ NdtStatus toStatusMsg(const LocalizerOutput& out, const std_msgs::Header& header
   msg.state = toString(out.state);
   msg.tiles_in_flight = static_cast<std::uint32_t>(out.tiles_in_flight);
   msg.tiles_awaited = static_cast<std::uint32_t>(out.tiles_awaited);
+  msg.start_pending = out.start_pending;
+  if (out.start_pending) {
+    msg.start_x = out.prediction.translation().x();
+    msg.start_y = out.prediction.translation().y();
+    msg.start_yaw = std::atan2(out.prediction.linear()(1, 0), out.prediction.linear()(0, 0));
+  }
+  msg.start_motion_guessed = out.start_motion_guessed;
   msg.converged = out.ndt.converged;
   msg.match_accepted = out.match_accepted;
   msg.iterations = out.ndt.iterations;

@@ -314,7 +314,11 @@ DriveRun drive(const gpl::LocalizerConfig& config, const Truth& truth, const std
   loadMap(loc, world);
   loc.setInitialPose(initial_pose);
   DriveRun run;
-  std::optional<double> last_accepted, unpublished_since;
+  std::optional<double> last_accepted;
+  // The first scan not published since the last accepted one [s]. Not a std::optional: GCC 12 warns that its value
+  // may be used uninitialized (-Wmaybe-uninitialized) where it is read.
+  bool unpublished = false;
+  double unpublished_since = 0.0;
   for (std::size_t i = 0; i < times.size(); ++i) {
     const double time = times[i];
     gpl::LocalizerOutput out =
@@ -325,14 +329,17 @@ DriveRun drive(const gpl::LocalizerConfig& config, const Truth& truth, const std
     run.lost_seen = run.lost_seen || out.lost;
     if (out.publish && !out.match_accepted && last_accepted && time - *last_accepted > config.lost.max_coast_time)
       run.published_stale = true;
-    if (!out.publish && !unpublished_since) unpublished_since = time;
+    if (!out.publish && !unpublished) {
+      unpublished = true;
+      unpublished_since = time;
+    }
     if (out.match_accepted) {
       ++run.accepted;
       last_accepted = time;
       run.worst_error = std::max(run.worst_error, t::translationError(out.pose, truth(time)));
       run.worst_yaw_error = std::max(run.worst_yaw_error, t::rotationError(out.pose, truth(time)));
-      if (unpublished_since) run.longest_unpublished = std::max(run.longest_unpublished, time - *unpublished_since);
-      unpublished_since.reset();
+      if (unpublished) run.longest_unpublished = std::max(run.longest_unpublished, time - unpublished_since);
+      unpublished = false;
     }
     if ((out.search_started && !racing.count(i)) || (i > 0 && racing.count(i - 1))) loc.waitForSearch();
     run.outputs.push_back(std::move(out));
@@ -506,6 +513,56 @@ TEST(Localizer, InitialPoseWaitsForTheMapStillLoading) {
   const gpl::LocalizerOutput second = loc.processScan(0.1, scanAt(world, 0.1, 2), mount());
   ASSERT_TRUE(second.match_accepted);
   EXPECT_LT(t::translationError(second.pose, truthAt(0.1)), 0.05);
+}
+
+// A start given while its map is still on its way (a slow map store): the vehicle drives on at 4 m/s, and the start
+// goes with it, so that the first match, once the map comes, is made where the vehicle is, 12 m on.
+TEST(Localizer, AStartWaitingForItsMapIsCarriedByTheScans) {
+  const gpl::PointCloud world = t::makeWorld();
+  gpl::Localizer loc(testConfig());
+  loc.setInitialPose(truthAt(0.0));
+  double worst_carried = 0.0;
+  for (int i = 0; i < 30; ++i) {
+    const double time = 0.1 * i;
+    const gpl::LocalizerOutput out = loc.processScan(time, scanAt(world, time, 1 + i), mount());
+    ASSERT_EQ(out.state, gpl::LocalizerState::kWaitingForMap);
+    ASSERT_TRUE(out.start_pending);
+    EXPECT_FALSE(out.start_motion_guessed) << "scan " << i;
+    EXPECT_FALSE(out.publish);
+    worst_carried = std::max(worst_carried, t::translationError(out.prediction, truthAt(time)));
+  }
+  EXPECT_LT(worst_carried, 0.5) << "m, the start carried over 12 m";
+  loadMap(loc, world);
+  const gpl::LocalizerOutput first = loc.processScan(3.0, scanAt(world, 3.0, 40), mount());
+  ASSERT_TRUE(first.match_accepted);
+  EXPECT_FALSE(first.start_pending);
+  EXPECT_LT(t::translationError(first.pose, truthAt(3.0)), 0.05);
+  EXPECT_LT(t::rotationError(first.pose, truthAt(3.0)), 0.01);
+}
+
+// A scan that matches nothing while the start waits (a blinded sensor): the motion over it is a guess, so the start
+// is no longer known to the NDT's reach. It is searched around, not matched from, and the search finds the vehicle.
+TEST(Localizer, AStartCarriedOverAnUnmatchedScanIsSearchedAroundNotMatchedFrom) {
+  const gpl::PointCloud world = t::makeWorld();
+  gpl::Localizer loc(testConfig());
+  loc.setInitialPose(truthAt(0.0));
+  gpl::LocalizerOutput out;
+  for (int i = 0; i < 10; ++i) {
+    const double time = 0.1 * i;
+    gpl::PointCloud scan = scanAt(world, time, 1 + i);
+    if (i == 5)
+      for (gpl::Point& p : scan) p.z() += 25.0f;  // nothing of the yard where it was
+    out = loc.processScan(time, scan, mount());
+    ASSERT_EQ(out.state, gpl::LocalizerState::kWaitingForMap);
+    EXPECT_EQ(out.start_motion_guessed, i >= 5) << "scan " << i;
+  }
+  loadMap(loc, world);
+  double time = 1.0;
+  out = loc.processScan(time, scanAt(world, time, 11), mount());
+  ASSERT_TRUE(out.match_accepted);
+  EXPECT_TRUE(out.global_search);
+  EXPECT_LT(t::translationError(out.pose, truthAt(time)), 0.05);
+  EXPECT_LT(t::rotationError(out.pose, truthAt(time)), 0.01);
 }
 
 // Hypotheses cost nothing while the first match is good.

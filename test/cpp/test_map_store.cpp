@@ -463,6 +463,20 @@ class MapWorkerOverHttp : public ::testing::Test {
 
   std::string url() const { return server_->url("/map"); }
 
+  // A localizer for scans of makeWorld() from a sensor at kMount (a 0.4 m scan voxel, 30 m range, the start search on
+  // the scan thread) whose tiles come through the map store with config_.
+  std::unique_ptr<gpl::Localizer> storeLocalizer() const {
+    gpl::LocalizerConfig c;
+    c.preprocess.voxel_size = 0.4;
+    c.preprocess.max_range = 30.0;
+    c.lost.background_search = false;
+    auto loc = std::make_unique<gpl::Localizer>(c);
+    loc->map().setMapStoreConfig(config_);
+    return loc;
+  }
+  const Eigen::Isometry3d kMount = gpl::test::poseXYYaw(0.3, 0.0, 0.05, 1.8);  // base_T_sensor
+  const gpl::PointCloud kWorld = gpl::test::makeWorld();
+
   ServedWorld world_;
   std::unique_ptr<NginxServer> server_;
   std::string cache_;
@@ -683,26 +697,30 @@ TEST_F(MapWorkerOverHttp, AChangeQueuedWhileASlowWindowLoadsJoinsIt) {
 
 TEST_F(MapWorkerOverHttp, AStartOnASlowStoreWaitsForTheTilesAroundItAndIsNotLostMeanwhile) {
   const gpl_test::DelayProxyServer slow(server_->port(), 300.0);
-  gpl::LocalizerConfig c;
-  c.preprocess.voxel_size = 0.4;
-  c.preprocess.max_range = 30.0;
-  c.lost.background_search = false;
-  gpl::Localizer loc(c);
-  loc.map().setMapStoreConfig(config_);
+  const std::unique_ptr<gpl::Localizer> localizer = storeLocalizer();
+  gpl::Localizer& loc = *localizer;
   const Eigen::Isometry3d standing = gpl::test::poseXYYaw(-12.0, 2.0, 0.2);  // the vehicle waits at its start
-  const Eigen::Isometry3d mount = gpl::test::poseXYYaw(0.3, 0.0, 0.05, 1.8);
-  const gpl::PointCloud world = gpl::test::makeWorld();
   loc.map().setFocus(standing.translation().head<2>());
   loc.setInitialPose(standing);
   loc.map().submit(fileChange(slow.url("/map"), world_.revision(), true, world_.ids));
   std::size_t waited_for_tiles = 0, tracked = 0, in_flight_at_first_pose = 0;
   for (int i = 0; tracked < 10 && i < 2000; ++i) {
     const gpl::LocalizerOutput out =
-        loc.processScan(0.1 * i, gpl::test::scanFrom(world, standing * mount, 30.0f, 0.01f, i), mount);
+        loc.processScan(0.1 * i, gpl::test::scanFrom(kWorld, standing * kMount, 30.0f, 0.01f, i), kMount);
     EXPECT_FALSE(out.lost) << "scan " << i << ": lost on a window still arriving";
     if (out.state == gpl::LocalizerState::kWaitingForMap) {
       EXPECT_FALSE(out.publish);
-      if (out.tiles_awaited > 0) ++waited_for_tiles;
+      if (out.tiles_awaited > 0 && waited_for_tiles++ == 0) {
+        // A start search over the same tiles waits for them too, without running.
+        gpl::SearchRegion region;
+        region.centre = standing;
+        region.radius = 10.0;
+        const std::optional<gpl::StartSearch> search = loc.startSearchForStart(region);
+        ASSERT_TRUE(search);
+        EXPECT_GT(search->tiles_awaited, 0u);
+        EXPECT_FALSE(search->search.found);
+        EXPECT_FALSE(loc.searching());
+      }
       std::this_thread::sleep_for(std::chrono::milliseconds(20));
       continue;
     }
@@ -710,7 +728,7 @@ TEST_F(MapWorkerOverHttp, AStartOnASlowStoreWaitsForTheTilesAroundItAndIsNotLost
     if (tracked++ == 0) {
       in_flight_at_first_pose = out.tiles_in_flight;
       // Matched once the tiles around the start had arrived, not before.
-      EXPECT_EQ(loc.tilesAwaited(standing.translation().head<2>(), c.map_wait_half_side), 0u);
+      EXPECT_EQ(loc.tilesAwaited(standing.translation().head<2>(), loc.config().map_wait_half_side), 0u);
     }
     EXPECT_TRUE(out.match_accepted) << "scan " << i;
     EXPECT_LT(gpl::test::translationError(out.pose, standing), 0.05) << "scan " << i;
@@ -726,10 +744,49 @@ TEST_F(MapWorkerOverHttp, AStartOnASlowStoreWaitsForTheTilesAroundItAndIsNotLost
   std::uniform_real_distribution<float> u(-20.0f, 20.0f);
   for (int k = 0; k < 3000; ++k) noise.push_back(gpl::Point(u(rng), u(rng), 0.1f * u(rng)));
   gpl::LocalizerOutput out;
-  for (int k = 0; k < 3; ++k) out = loc.processScan(300.0 + 0.1 * k, noise, mount);
+  for (int k = 0; k < 3; ++k) out = loc.processScan(300.0 + 0.1 * k, noise, kMount);
   EXPECT_TRUE(out.lost);
   EXPECT_EQ(out.tiles_awaited, 0u);
   EXPECT_EQ(out.tiles_in_flight, 0u);
+}
+
+// The vehicle drives into a part of the window still arriving (it outran a slow store): the track waits there,
+// carried by its scans, instead of matching on the part that has come, and is never published off; it tracks again
+// once the tiles around it are in.
+TEST_F(MapWorkerOverHttp, ATrackDrivingIntoTilesStillInFlightWaitsCarriedAndIsNeverPublishedOff) {
+  const gpl_test::DelayProxyServer slow(server_->port(), 100.0);
+  const std::unique_ptr<gpl::Localizer> localizer = storeLocalizer();
+  gpl::Localizer& loc = *localizer;
+  const auto truth = [](double t) { return gpl::test::poseXYYaw(-20.0 + 4.0 * t, 1.0, 0.0); };
+  std::vector<std::string> west, east;
+  for (const std::string& id : world_.ids) (gpl::tileKeyOfStem(id, 2.0).i < -2 ? west : east).push_back(id);
+  loc.map().submit(fileChange(slow.url("/map"), world_.revision(), true, west));
+  loc.map().waitIdle();
+  loc.setInitialPose(truth(0.0));
+  std::size_t waited = 0, published = 0;
+  gpl::LocalizerOutput out;
+  for (int i = 0; i < 70; ++i) {
+    const double t = 0.1 * i;
+    if (i == 10) loc.map().submit(fileChange(slow.url("/map"), world_.revision(), false, east));  // 100 tiles/s
+    out = loc.processScan(t, gpl::test::scanFrom(kWorld, truth(t) * kMount, 30.0f, 0.01f, i), kMount);
+    EXPECT_FALSE(out.lost) << "scan " << i;
+    if (out.state == gpl::LocalizerState::kWaitingForMap) {
+      EXPECT_TRUE(out.start_pending) << "scan " << i;
+      EXPECT_FALSE(out.publish);
+      EXPECT_GT(out.tiles_awaited, 0u);
+      waited += out.tiles_awaited > 0;
+    }
+    if (out.publish) {
+      ++published;
+      EXPECT_LT(gpl::test::translationError(out.pose, truth(t)), 0.1) << "scan " << i << ", published off";
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));  // the scans come in real time
+  }
+  EXPECT_GT(waited, 0u) << "the track never waited for the tiles in flight around it";
+  EXPECT_GE(published, 20u);
+  ASSERT_EQ(out.state, gpl::LocalizerState::kTracking);
+  EXPECT_TRUE(out.match_accepted);
+  EXPECT_LT(gpl::test::translationError(out.pose, truth(6.9)), 0.05);
 }
 
 // ---- the provider's tile references follow a directory given by URL through its polled index

@@ -299,6 +299,25 @@ class MapProviderTest(unittest.TestCase):
         )
         self.apply_new_deltas()
 
+    def test_4c_the_window_goes_with_a_start_the_localizer_carries_while_its_map_arrives(self):
+        self.apply_new_deltas()
+        seen = MapProviderTest.last_revision
+        status = NdtStatus(state="waiting_for_map", start_pending=True, start_x=25.3, start_y=5.3, start_yaw=0.0)
+        status.header.stamp = rospy.Time.now()
+        self.localizer_status.publish(status)
+        ahead = expected_bounds(25.3, 5.3, 0.0)  # moved east from the window at (5.3, 5.3)
+        self.deltas.wait_for(
+            lambda d: d.revision > seen and (d.i_min, d.i_max, d.j_min, d.j_max) == ahead, f"the window at {ahead}"
+        )
+        self.apply_new_deltas()
+        seen = MapProviderTest.last_revision
+        self.send(5.3, 5.3)
+        home = expected_bounds(5.3, 5.3, 180.0)
+        self.deltas.wait_for(
+            lambda d: d.revision > seen and (d.i_min, d.i_max, d.j_min, d.j_max) == home, "the window back home"
+        )
+        self.apply_new_deltas()
+
     def test_5_a_rewritten_directory_is_sent_again_as_a_reset_with_a_new_revision(self):
         self.apply_new_deltas()
         with self.deltas.cond:

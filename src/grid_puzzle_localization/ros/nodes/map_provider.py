@@ -122,7 +122,9 @@ class MapProviderNode:
             rospy.Subscriber("initialpose", PoseWithCovarianceStamped, self._on_initial_pose, queue_size=1)
         else:
             rospy.Subscriber("pose", PoseWithCovarianceStamped, self._on_pose, queue_size=1)
-        if self.config.lost.max_half_side > 0.0:
+        # The localizer's status: a start it carries while the start's map arrives, and the region it searches when
+        # lost.
+        if self.config.pose_source == "odom" or self.config.lost.max_half_side > 0.0:
             rospy.Subscriber("localizer_status", NdtStatus, self._on_localizer_status, queue_size=1)
         rospy.Subscriber("initialpose_hint", PoseWithCovarianceStamped, self._on_hint, queue_size=1)
         self._saved_pose = SavedPoseWriter(self.config.save_pose_rate)
@@ -194,6 +196,11 @@ class MapProviderNode:
             self._pose_ready.notify()
 
     def _on_localizer_status(self, msg: NdtStatus) -> None:
+        if msg.start_pending and self.config.pose_source == "odom":
+            # A start the localizer carries while its map arrives (the vehicle drives on): the window goes with it.
+            self._offer(PoseSample(msg.start_x, msg.start_y, msg.header.stamp.to_sec(), msg.start_yaw))
+        if self.config.lost.max_half_side <= 0.0:
+            return
         with self._pose_ready:
             # The window grows for a search only once its tiles have all arrived: a growth queued behind a window
             # still loading would only slow what the robot needs now.
