@@ -13,24 +13,28 @@
 // Usage: bench_localizer INPUT.bin cloud|tiles|repeat|replay [--tile-size S] [--window N] [--threads T] [--resolution
 // R]
 //                        [--max-range M] [--max-step-size M] [--coarse-points N] [--coarse-yaw-probe RAD]
-//                        [--trace FILE] [--tile-source DIR|URL] [--index-revision REV]
+//                        [--trace FILE] [--tile-source DIR|URL] [--index-revision REV] [--update-distance M]
+//                        [--map-wait-half-side M]
 //                        [--map-store-cache DIR] [--cold-start 0|1] [--pace rate|stamps]
 // --trace writes one CSV row per scan (latency, NDT iterations, prediction and ground-truth errors, whether the
 // match was accepted and the pose published, the localizer's state, lost, the window's tiles in flight and those the
-// scan waited for, those in flight within map_wait_half_side of the first scan's true position (before the first map
-// is swapped in: all of the first window's there), the pose, the monotonic clock, whether the map store answers, the
-// true position) to FILE.
+// scan waited for, those in flight within map_wait_half_side of the first scan's true position and of this scan's
+// (before the first map is swapped in: all of the first window's there), the pose, the monotonic clock, whether the map
+// store answers, the true position) to FILE.
 // --cold-start 1: the drive starts as soon as the first window is submitted, without waiting for its tiles (the
 // localizer waits for those around the start itself, as from a slow map store); the JSON line then gives the first
-// window's tile count and the time until all of it was in the map (first_window). The window follows the pose only
-// while the localizer tracks, and the tiles still to load go nearest the initial pose, then nearest each tracked
-// scan's prediction first (the map worker's focus, as the nodelet sets it).
+// window's tile count and the time until all of it was in the map (first_window). The window follows the pose while
+// the localizer tracks, and the start it carries while that waits for its map; the tiles still to load go nearest
+// the localizer's focus first (the start, then each tracked scan's prediction).
 // --pace stamps: each scan is handed over at its own stamp after the first (a recording's real time, e.g. keyframes
 // at irregular intervals) instead of every 1 / rate_hz.
 // --tile-source: tiles mode names the window's tiles by reference, as the provider does, in a tile directory that
 // `gpm tile` cut from the same map with the same tile size, or at the URL of a map store serving one (fetched into
 // --map-store-cache; --index-revision is then the revision of its index.json, as the provider sends it);
 // bench/bench_map_store.py runs it behind a delaying proxy.
+// --update-distance M: the window is recomputed only once the pose has moved more than M [m] from where it was last
+// (the provider's window/update_distance); 0: at every tile the pose crosses. The JSON line's map_worker gives the
+// worker thread's CPU time over the drive (after a first window that was waited for) and per metre driven.
 // INPUT.bin (little endian) is written by bench/bench_localizer.py:
 //   char[8] "GPLBENCH"; f64 rate_hz; u64 n_map; f32 map[n_map][3]; f64 base_T_sensor[16] (row-major);
 //   u64 n_imu; f64 imu[n_imu][4] (stamp, gyro x y z in base_link [rad/s]);
@@ -247,6 +251,7 @@ int main(int argc, char** argv) {
         stderr,
         "usage: %s INPUT.bin cloud|tiles|repeat|replay [--tile-size S] [--window N] [--threads T] [--resolution R] "
         "[--max-range M] [--max-step-size M] [--coarse-points N] [--coarse-yaw-probe RAD] [--trace FILE] "
+        "[--update-distance M] [--map-wait-half-side M] "
         "[--tile-source DIR|URL] [--index-revision REV] [--map-store-cache DIR] [--cold-start 0|1] "
         "[--pace rate|stamps]\n",
         argv[0]);
@@ -259,7 +264,8 @@ int main(int argc, char** argv) {
   }
   double tile_size = 10.0;
   int half_window = 3;
-  int threads = -1;  // -1: the LocalizerConfig default
+  double update_distance = 0.0;  // [m] 0: the window follows every tile the pose crosses
+  int threads = -1;              // -1: the LocalizerConfig default
   gpl::LocalizerConfig config;
   // The scans come as fast as they are matched, not in real time: a search answers within the scan it searches,
   // so a replay gives the same answer every run.
@@ -273,6 +279,10 @@ int main(int argc, char** argv) {
       tile_size = std::stod(argv[i + 1]);
     else if (opt == "--window")
       half_window = std::stoi(argv[i + 1]);
+    else if (opt == "--update-distance")
+      update_distance = std::stod(argv[i + 1]);
+    else if (opt == "--map-wait-half-side")
+      config.map_wait_half_side = std::stod(argv[i + 1]);
     else if (opt == "--threads")
       threads = std::stoi(argv[i + 1]);
     else if (opt == "--resolution")
@@ -326,11 +336,14 @@ int main(int argc, char** argv) {
   std::set<TileKey> loaded;
   std::size_t updates = 0;
   const bool replay = mode == "replay";
+  std::optional<Eigen::Vector3d> centre;  // where the window was last recomputed
   auto follow = [&](const Eigen::Vector3d& at) {
     if (replay) {
       if (updates++ == 0) loc.map().submit(gpl::MapChange::fullCloud(input.map));
       return;
     }
+    if (centre && update_distance > 0.0 && (at - *centre).head<2>().norm() <= update_distance) return;
+    centre = at;
     const std::set<TileKey> want = window(tiles, at, tile_size, half_window);
     if (want == loaded) return;
     if (mode == "cloud") {
@@ -368,21 +381,20 @@ int main(int argc, char** argv) {
   if (!cold_start) loc.map().waitIdle();
   if (mode == "repeat") return repeatFirstScan(loc, input, scan);
   loc.setInitialPose(scan.truth);
-  // A cold start orders the tiles still to load as the nodelet does: nearest the initial pose, then nearest each
-  // tracked scan's prediction.
-  if (cold_start) loc.map().setFocus(scan.truth.translation().head<2>());
   const Eigen::Vector2d start_xy = scan.truth.translation().head<2>();
   double first_window_load_ms = -1.0;  // the first whole snapshot's update time (cold start)
   // The first window's tiles that meet the square of half side map_wait_half_side about the start (as
   // TilesInFlight::within counts them): all in flight until the localizer has a map.
-  std::size_t start_square_tiles = 0;
-  for (const TileKey& k : loaded) {
-    const Eigen::Vector2d low(k.first * tile_size, k.second * tile_size);
-    const double half = config.map_wait_half_side;
-    if ((low.array() < start_xy.array() + half).all() && (low.array() + tile_size > start_xy.array() - half).all())
-      ++start_square_tiles;
-  }
+  gpl::TilesInFlight first_window;
+  first_window.tile_size = tile_size;
+  for (const TileKey& k : loaded) first_window.keys.push_back({k.first, k.second});
+  const auto first_window_tiles_near = [&](const Eigen::Vector2d& xy) {
+    return first_window.within(xy, config.map_wait_half_side);
+  };
+  const std::size_t start_square_tiles = first_window_tiles_near(start_xy);
   bool have_map = false;  // a target was swapped in
+  // The map worker's CPU time before the drive (the first window, when it was waited for): the drive's own is the rest.
+  const double worker_cpu_before_ms = loc.map().stats().worker_cpu_ms;
 
   std::ofstream trace;
   if (!trace_path.empty()) {
@@ -394,7 +406,8 @@ int main(int argc, char** argv) {
     trace << "scan,stamp_s,scan_ms,align_ms,cpu_ms,iterations,evaluations,coarse_evaluations,source_points,"
              "update_pending,prediction_to_match_m,prediction_to_match_rad,prediction_error_m,prediction_error_rad,"
              "error_m,error_rad,truth_yaw_rate_rad_s,accepted,published,hypotheses,global_search,nvtl,"
-             "global_search_reason,state,lost,tiles_in_flight,tiles_awaited,start_tiles_in_flight,x,y,yaw,"
+             "global_search_reason,state,lost,tiles_in_flight,tiles_awaited,start_tiles_in_flight,"
+             "scan_square_tiles_in_flight,x,y,yaw,"
              "monotonic_s,map_store_reachable,truth_x,truth_y\n";
   }
   // latency_loading: scans that overlapped a target update and ran no branch-and-bound search (a search, e.g. on
@@ -463,7 +476,9 @@ int main(int argc, char** argv) {
             << out.global_search << ',' << out.ndt.nvtl << ",\"" << reason << "\"," << gpl::toString(out.state) << ','
             << out.lost << ',' << out.tiles_in_flight << ',' << out.tiles_awaited << ','
             << (have_map ? loc.tilesAwaited(start_xy, config.map_wait_half_side) : start_square_tiles) << ','
-            << std::setprecision(9) << out.pose.translation().x() << ',' << out.pose.translation().y() << ','
+            << (have_map ? loc.tilesAwaited(scan.truth.translation().head<2>(), config.map_wait_half_side)
+                         : first_window_tiles_near(scan.truth.translation().head<2>()))
+            << ',' << std::setprecision(9) << out.pose.translation().x() << ',' << out.pose.translation().y() << ','
             << std::atan2(out.pose.linear()(1, 0), out.pose.linear()(0, 0)) << ',' << monotonicSeconds() << ','
             << loc.map().stats().map_store_reachable << ',' << scan.truth.translation().x() << ','
             << scan.truth.translation().y() << std::defaultfloat << std::setprecision(6) << '\n';
@@ -479,10 +494,11 @@ int main(int argc, char** argv) {
       update_ms.push_back(stats.update_ms);
       if (first_window_load_ms < 0.0) first_window_load_ms = stats.update_ms;
     }
-    if (out.state == gpl::LocalizerState::kTracking) {
-      if (cold_start) loc.map().setFocus(out.prediction.translation().head<2>());
+    // The window follows the pose, and a start carried while its map arrives, as the provider does.
+    if (out.state == gpl::LocalizerState::kTracking)
       follow(out.pose.translation());
-    }
+    else if (out.start_pending)
+      follow(out.prediction.translation());
   }
   loc.map().waitIdle();
   const gpl::MapUpdateStats end = loc.map().stats();
@@ -506,7 +522,9 @@ int main(int argc, char** argv) {
       "\"window_tiles\": %d, \"ndt_threads\": %d, \"map_update_threads\": %d, \"gyro_samples\": %zu, "
       "\"peak_rss_mb\": %.1f, \"distance_m\": %.1f, \"map_store\": {\"tiles_fetched\": %zu, \"bytes_fetched\": %llu, "
       "\"reachable\": %s}, \"map_update_failures\": %zu, \"cold_start\": %s, \"pace\": \"%s\", "
-      "\"first_window\": {\"tiles\": %zu, \"start_square_tiles\": %zu, \"load_ms\": %.1f}}\n",
+      "\"first_window\": {\"tiles\": %zu, \"start_square_tiles\": %zu, \"load_ms\": %.1f}, "
+      "\"update_distance_m\": %.2f, \"map_worker\": {\"cpu_ms\": %.1f, \"read_cpu_ms\": %.1f, \"fold_cpu_ms\": %.1f, "
+      "\"tiles_read\": %zu, \"cpu_ms_per_m\": %.3f}}\n",
       mode.c_str(), static_cast<std::size_t>(input.scans), first_scan_ms, percentile(latency, 0.5),
       percentile(latency, 0.95), percentile(latency, 0.99), percentile(latency, 1.0),
       percentile(latency, 0.99) / percentile(latency, 0.5), percentile(latency_pending, 1.0), latency_pending.size(),
@@ -516,6 +534,8 @@ int main(int argc, char** argv) {
       (2 * half_window + 1) * (2 * half_window + 1), config.ndt.threads, config.map_update_threads, input.gyro.size(),
       peakRssMb(), distance, end.map_store_fetched, static_cast<unsigned long long>(end.map_store_bytes),
       end.map_store_reachable ? "true" : "false", failed.size(), cold_start ? "true" : "false", pace.c_str(),
-      first_window_tiles, start_square_tiles, cold_start ? first_window_load_ms : 0.0);
+      first_window_tiles, start_square_tiles, cold_start ? first_window_load_ms : 0.0, update_distance,
+      end.worker_cpu_ms, end.tile_read_cpu_ms, end.tile_fold_cpu_ms, static_cast<std::size_t>(end.tiles_read),
+      distance > 0.0 ? (end.worker_cpu_ms - worker_cpu_before_ms) / distance : 0.0);
   return 0;
 }
