@@ -123,6 +123,14 @@ bench-map-store: setup
 	  bash $(ROOT)/tools/build.sh >$$log 2>&1 || { tail -40 $$log; exit 1; }
 	@$(SETUP) python3 $(ROOT)/bench/bench_map_store.py $(ARGS)
 
+# make bench-map-worker [ARGS="--quick"]: the map worker's CPU per metre driven on kitti00_far per window update
+# distance (docs/map_store.md).
+.PHONY: bench-map-worker
+bench-map-worker: setup
+	@log=$(ROOT)/build/bench_map_worker_build.log; mkdir -p $(ROOT)/build; \
+	  bash $(ROOT)/tools/build.sh >$$log 2>&1 || { tail -40 $$log; exit 1; }
+	@$(SETUP) python3 $(ROOT)/bench/bench_map_worker.py $(ARGS)
+
 # ---------------------------------------------------------------- block maps
 .PHONY: bench-blocks
 bench-blocks: build

@@ -23,6 +23,7 @@ QUICK = {
     "bench-provider": [sys.executable, str(ROOT / "bench/bench_provider.py"), "--quick"],
     "bench-ndt": [str(BIN / "bench_ndt"), "--quick"],
     "bench-map-store": [sys.executable, str(ROOT / "bench/bench_map_store.py"), "--quick"],
+    "bench-map-worker": [sys.executable, str(ROOT / "bench/bench_map_worker.py"), "--quick"],
     "bench-localizer": [sys.executable, str(ROOT / "bench/bench_localizer.py"), "--quick"],
     "bench-sim": [sys.executable, str(ROOT / "bench/bench_sim.py"), "--quick"],
     "bench-blocks": [sys.executable, str(ROOT / "bench/bench_blocks.py"), "--quick"],
@@ -96,3 +97,16 @@ def test_bench_provider_quick_drives_the_node_with_deltas_in_order(quick_output)
     assert drive["delta_revisions_contiguous"] and drive["deltas_received"] > 3
     assert drive["tiles_prefetch_per_update"]["max"] > 0
     assert result["sparse"]["drive_with_map_cloud_subscriber"]["map_clouds_received"] > 0
+
+
+def test_bench_map_worker_quick_reports_the_worker_per_metre_and_fewer_updates_further_apart(quick_output):
+    rows = quick_output("bench-map-worker")
+    runs = {row["update_distance_m"]: row for row in rows if not row.get("summary")}
+    assert set(runs) == {5.0, 20.0}
+    for row in runs.values():
+        assert row["distance_m"] > 0 and row["map_worker_cpu_ms_per_m"] > 0
+        assert row["read_cpu_ms"] + row["fold_cpu_ms"] <= row["map_worker_cpu_ms"]
+        assert row["max_error_m"] < 0.1  # the drive is tracked whatever the distance
+    assert runs[20.0]["window_updates"] < runs[5.0]["window_updates"]
+    summaries = [row for row in rows if row.get("summary")]
+    assert [s["update_distance_m"] for s in summaries] == [5.0, 20.0]
