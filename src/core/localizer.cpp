@@ -7,8 +7,6 @@
 #include <stdexcept>
 #include <utility>
 
-#include "thread_priority.hpp"
-
 namespace grid_puzzle_localization {
 namespace {
 
@@ -62,8 +60,6 @@ constexpr int kCarriedMatchIterations = 6;
 // An automatic start holds the answers of this many searches that no later one agreed with yet (the oldest goes):
 // on a loaded machine a search takes over a second, and a right answer followed by a wrong one still finds its match.
 constexpr std::size_t kHeldStartAnswers = 4;
-// A start search beside the scan thread runs this much nicer than it (its OpenMP team too).
-constexpr int kStartSearchNiceIncrement = 10;
 
 NdtConfig carriedMatchConfig(const NdtConfig& config) {
   NdtConfig c = config;
@@ -111,47 +107,6 @@ Localizer::Localizer(const LocalizerConfig& config)
       worker_(workerParams(config)),
       fusion_(config.fusion),
       global_(globalSearchConfig(config)) {}
-
-void Localizer::setInitialPose(const Eigen::Isometry3d& map_T_base) { holdStart(map_T_base); }
-
-void Localizer::setDefaultInitialPose(const Eigen::Isometry3d& map_T_base) {
-  default_initial_pose_ = map_T_base;
-  if (!predictor_.initialized()) holdStart(map_T_base);
-}
-
-void Localizer::holdStart(const std::optional<Eigen::Isometry3d>& map_T_base, const Twist& velocity) {
-  pending_initial_pose_ = map_T_base;
-  start_odometry_.reset(velocity);
-  start_motion_guessed_ = false;
-  if (map_T_base) worker_.setFocus(map_T_base->translation().head<2>());  // its tiles first
-}
-
-void Localizer::prepareUndeskewed(const PointCloud& scan, const Eigen::Isometry3d& base_T_sensor, double stamp,
-                                  LocalizerOutput& out) {
-  preprocessor_.apply(scan, source_, &out.preprocess);
-  const Eigen::Isometry3f base_T_sensor_f = base_T_sensor.cast<float>();
-  for (Point& p : source_) p = base_T_sensor_f * p;
-  source_stamp_ = stamp;
-}
-
-void Localizer::carryStart(double stamp, LocalizerOutput& out) {
-  OdometryStep step = OdometryStep::kFirst;
-  const Eigen::Isometry3d motion = start_odometry_.add(stamp, source_, &step);
-  *pending_initial_pose_ = *pending_initial_pose_ * motion;
-  start_motion_guessed_ = start_motion_guessed_ || step == OdometryStep::kGuessed;
-  out.prediction = *pending_initial_pose_;
-  out.start_pending = true;
-  out.start_motion_guessed = start_motion_guessed_;
-  worker_.setFocus(out.prediction.translation().head<2>());
-}
-
-void Localizer::waitForMapCarried(double stamp, std::size_t awaited, LocalizerOutput& out) {
-  predictor_ = PosePredictor();
-  ++track_version_;
-  carryStart(stamp, out);
-  out.state = LocalizerState::kWaitingForMap;
-  out.tiles_awaited = awaited;
-}
 
 void Localizer::addGyro(double stamp, const Eigen::Vector3d& angular_velocity) {
   if (angular_velocity.allFinite()) gyro_.add(stamp, angular_velocity);
@@ -329,52 +284,6 @@ GlobalLocalizationResult Localizer::globalLocalize(const SearchRegion& region) {
   GlobalLocalizationResult r = searchLastScan(searchRequest(region));
   if (r.found) startFromSearch(r);
   return r;
-}
-
-Localizer::StartSearch Localizer::searchForStart(const SearchRegion& region) {
-  // Nothing is tracked while a start is searched for: the search takes every core.
-  GlobalLocalizationResult r = searchLastScan(searchRequest(region, 0));
-  return judgeStart(std::move(r), source_stamp_.value_or(0.0));
-}
-
-std::optional<StartSearch> Localizer::startSearchForStart(const SearchRegion& region) {
-  // On a window still arriving the search would call the place ambiguous, or find a look-alike: it waits.
-  if (const std::size_t awaited = tilesAwaited(region.centre.translation().head<2>(), region.radius)) {
-    StartSearch waiting;
-    waiting.tiles_awaited = awaited;
-    waiting.search.reason = "waits for " + std::to_string(awaited) + " tiles of its region still loading";
-    return waiting;
-  }
-  if (!config_.lost.background_search) return searchForStart(region);
-  if (search_) return std::nullopt;
-  if (!target_ || target_->gaussianCount() == 0 || !source_stamp_) {
-    StartSearch none;
-    none.search.reason = source_stamp_ ? "no map yet" : "no scan yet";
-    return none;
-  }
-  BackgroundSearch job;
-  job.stamp = *source_stamp_;
-  job.track_version = track_version_;
-  job.start = true;
-  // Every core, as searchForStart, but below the scan thread: the scans that come meanwhile are not held back by it.
-  job.result =
-      std::async(std::launch::async, [this, target = target_, source = source_, request = searchRequest(region, 0)] {
-        lowerCallingThreadPriority(kStartSearchNiceIncrement);
-        return runSearch(target, source, request);
-      });
-  search_ = std::move(job);
-  return std::nullopt;
-}
-
-std::optional<StartSearch> Localizer::takeStartSearch() {
-  if (!search_ || !search_->start || search_->result.wait_for(std::chrono::seconds(0)) != std::future_status::ready)
-    return std::nullopt;
-  BackgroundSearch job = std::move(*search_);
-  search_.reset();
-  GlobalLocalizationResult g = job.result.get();
-  releaseStaleSearchMap();
-  if (job.track_version != track_version_ || predictor_.initialized()) return std::nullopt;  // a pose came meanwhile
-  return judgeStart(std::move(g), job.stamp);
 }
 
 StartSearch Localizer::judgeStart(GlobalLocalizationResult r, double stamp) {
