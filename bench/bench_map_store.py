@@ -17,7 +17,8 @@
    its return until the store answered again.
 3. A cold start and a drive on throttled stores (bench_map_store_throttled.py): both stretches of kitti00_far, 2 m
    tiles, from disk, from nginx behind the proxy limited to 50, 100 and 200 tiles/s with a 100 ms round trip, and
-   from `python3 -m http.server`; one JSON line per run with the figures and targets of issue 58.
+   from `python3 -m http.server`, then cut into 4 m tiles from disk and at 50 and 100 tiles/s; one JSON line per run
+   with the figures and targets of issue 58.
 --quick: bench-localizer's synthetic street instead, 6 s with a 1.5 s outage, and part 3 on it at one rate (checks
 that it runs).
 """

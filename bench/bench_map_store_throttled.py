@@ -11,6 +11,9 @@ start: the first window is handed to the map worker with the first scan, not wai
   connections together; an empty disk cache each run;
 - `python_http_server`: `python3 -m http.server` serving the tile directory, no proxy (HTTP/1.0, a connection per
   tile); an empty disk cache.
+Then the same stretch cut into CAR_TILE_SIZE = 4 m tiles (a window of the same extent, n = 12) from disk and at the
+rates of CAR_TILE_RATES: a square of map_wait_half_side about a car at v takes in v 2 h / s^2 tiles a second (90 at
+9 m/s with 2 m tiles, 22 with 4 m ones), so 2 m tiles outrun a store of 50 or 100 tiles/s and 4 m tiles do not.
 One run each (repeats: 1). Each prints one JSON line with what the issue's targets ask for (`targets`):
 - the first pose is published once the tiles under its scan (those meeting the square of map_wait_half_side = 20 m
   each side of its true position: 40 m) have arrived (`published_with_tiles_missing` counts the published scans of
@@ -55,6 +58,8 @@ from experiment_tracking import KITTI, STRETCHES, VARIANTS, rounded, write_scena
 
 TILE_SIZE = 2.0  # [m] the urban preset's s
 RATES = (50.0, 100.0, 200.0)  # [tiles/s]
+CAR_TILE_SIZE = 4.0  # [m] tiles a car's square of map_wait_half_side does not outrun at CAR_TILE_RATES
+CAR_TILE_RATES = (50.0, 100.0)  # [tiles/s]
 QUICK_RATE = 100.0
 ONE_WAY_DELAY_S = 0.05  # each way: a request's round trip is 100 ms
 START_HALF_SIDE = 20.0  # [m] LocalizerConfig::map_wait_half_side (default): the start square is 40 m
@@ -84,6 +89,16 @@ def kitti_stretch(name: str, tmp: Path) -> Stretch:
     www.mkdir()
     tile_map([scenario / "global_map.pcd"], www / "map", TileConfig(grid_size=TILE_SIZE, progress=False))
     return Stretch(f"kitti00_far_{name}", data, www / "map", TILE_SIZE, PRESETS["urban"][0])
+
+
+def retiled(stretch: Stretch, global_map: Path, tile_size: float) -> Stretch:
+    """``stretch`` with its map ``global_map`` cut into tiles of ``tile_size`` [m], in a window of about the same
+    extent."""
+    www = stretch.tiles.parent.with_name(f"{stretch.tiles.parent.name}_{tile_size:g}m")
+    www.mkdir()
+    tile_map([global_map], www / "map", TileConfig(grid_size=tile_size, progress=False))
+    half_window = round((2 * stretch.half_window + 1) * stretch.tile_size / tile_size - 1) // 2
+    return Stretch(f"{stretch.name}_{tile_size:g}m", stretch.data, www / "map", tile_size, half_window)
 
 
 def square_tiles(tiles: Path, centre: np.ndarray, half: float) -> int:
@@ -278,4 +293,7 @@ def run(bin_dir: Path, quick: bool, street: Stretch | None = None, traces: Path 
             print(json.dumps({"bench": BENCH, "skipped": message + ", or GPL_SHARED_DATA)"}), flush=True)
             return
         for name in STRETCHES:
-            run_stretch(kitti_stretch(name, tmp), RATES, True, bin_dir, tmp, traces)
+            stretch = kitti_stretch(name, tmp)
+            run_stretch(stretch, RATES, True, bin_dir, tmp, traces)
+            car = retiled(stretch, tmp / f"kitti_{name}" / "global_map.pcd", CAR_TILE_SIZE)
+            run_stretch(car, CAR_TILE_RATES, False, bin_dir, tmp, traces)
