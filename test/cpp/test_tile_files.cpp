@@ -112,6 +112,7 @@ TEST(TileFiles, AddAndRemoveByReferenceEqualsAFromScratchBuildExactly) {
     gpl::MapUpdateWorker worker(params);
     const std::vector<std::string> first(w.ids.begin(), w.ids.begin() + 60);
     worker.submit(change(w.dir.path, true, first, {}, w.s));
+    worker.waitIdle();  // the slide would otherwise join the first change, and its leaving tiles go unread
     // Slide: 20 leave, 25 enter, one is read again in place, an unknown id leaves.
     std::vector<std::string> enter(w.ids.begin() + 60, w.ids.begin() + 85);
     enter.push_back(w.ids[30]);
