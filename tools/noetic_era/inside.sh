@@ -45,5 +45,7 @@ mv "$ws/src" "$ws/src.away"
     --max-rmse 0.05 --out "$check/install_space.json"
 ) || status=1
 restore
+# The failing tests again, after the install-space run's long listing: a log's tail then names them.
+if [[ -s $pkg/test_results/failed.txt ]]; then cat "$pkg/test_results/failed.txt"; fi
 log "done (status $status)"
 exit $status
