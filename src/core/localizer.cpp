@@ -441,10 +441,13 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
   }
   out.tiles_in_flight = in_flight_.keys.size();
   // A given pose is matched from once the tiles around it have arrived: a partial map could fit the scan elsewhere. It
-  // is matched moved on to this scan by its carried velocity: the tiles around that place.
-  if (pending_initial_pose_)
-    out.tiles_awaited = tilesAwaited((*pending_initial_pose_ * start_odometry_.motionTo(stamp)).translation().head<2>(),
-                                     config_.map_wait_half_side);
+  // is matched moved on to this scan by its carried velocity (from its last scan to this one): the tiles around that
+  // place.
+  std::optional<Eigen::Isometry3d> given_start;
+  if (pending_initial_pose_) {
+    given_start = *pending_initial_pose_ * start_odometry_.motionTo(stamp);
+    out.tiles_awaited = tilesAwaited(given_start->translation().head<2>(), config_.map_wait_half_side);
+  }
   if (!target_ || target_->gaussianCount() == 0 || out.tiles_awaited > 0) {
     // The vehicle may drive on meanwhile: the start goes with it.
     if (pending_initial_pose_) {
@@ -455,11 +458,9 @@ LocalizerOutput Localizer::processScan(double stamp, const PointCloud& scan, con
     out.scan_ms = msSince(start);
     return out;
   }
-  const std::optional<Eigen::Isometry3d> given_start = pending_initial_pose_;
   const bool fresh = given_start.has_value();
-  // A start carried while its map arrived moves on at the carried velocity from its last scan to this one.
   if (fresh) {
-    startFrom(*given_start * start_odometry_.motionTo(stamp), stamp, predictionCovariance(config_.covariance), 0.0);
+    startFrom(*given_start, stamp, predictionCovariance(config_.covariance), 0.0);
     // Its motion is the vehicle's: the next scan is matched from the start moved on by it first, as after a recovery.
     if (!start_odometry_.velocity().isZero()) last_twist_ = start_odometry_.velocity();
   }
