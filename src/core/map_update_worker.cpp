@@ -396,11 +396,25 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
                                 "') is not the one the loaded tiles came from ('" + tile_dir_ + "', revision '" +
                                 index_revision_ + "') and the change is not a reset; change ignored");
   if (!same_source) cache_.clear();  // cached tiles of another directory or revision are other tiles
-  startTiles(target, change.reset, grid_size);
+  std::vector<std::string> added = change.added;
+  std::vector<std::string> removed = change.removed;
+  const bool keep_held = keepsHeldTiles(change, grid_size);
+  if (keep_held) {
+    // The whole window again from the source the held tiles came from (a respawned provider, a resend): the held
+    // tiles it names stay, the others leave, and only the tiles not held are read (one that failed is read again).
+    const std::unordered_set<std::string> named(change.added.begin(), change.added.end());
+    added.clear();
+    removed.clear();
+    for (const std::string& id : change.added)
+      if (!tiles_.count(id)) added.push_back(id);
+    for (const auto& held : tiles_)
+      if (!named.count(held.first)) removed.push_back(held.first);
+  }
+  startTiles(target, change.reset && !keep_held, grid_size);
   tile_dir_ = change.dir;
   index_revision_ = change.index_revision;
   prefetch_.assign(change.prefetch.rbegin(), change.prefetch.rend());  // read from the back: first id first
-  removeTiles(target, change.removed);
+  removeTiles(target, removed);
   // Tiles are folded in batches of about kFoldBatchPoints: one target update (each touched shard copied once) per
   // batch instead of per tile, while what waits to be folded stays bounded.
   std::vector<PendingTile> pending;
@@ -418,7 +432,6 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
   // next changes of the same source, one fetch batch per change, the latest failures (nearest the vehicle) first:
   // after an outage the backlog drains over the next changes instead of holding back the first one, and the
   // target, for seconds. A reset names the whole window anyway.
-  std::vector<std::string> added = change.added;
   std::vector<std::string> deferred;
   if (store && same_source && !change.reset) {
     const std::unordered_set<std::string> leaving(change.removed.begin(), change.removed.end());
@@ -508,6 +521,11 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
   fold();
 }
 
+bool MapUpdateWorker::keepsHeldTiles(const TileFileChange& change, double grid_size) const {
+  return change.reset && !tiles_.empty() && grid_size == tile_size_ && change.dir == tile_dir_ &&
+         change.index_revision == index_revision_;
+}
+
 void MapUpdateWorker::planInFlight(const std::deque<MapChange>& batch) {
   const auto enter = [this](const std::string& id, double grid_size) {
     try {
@@ -525,10 +543,13 @@ void MapUpdateWorker::planInFlight(const std::deque<MapChange>& batch) {
     if ((tiles ? change.reset : change.files.reset) || change.grid_size != in_flight_size_) in_flight_.clear();
     in_flight_size_ = change.grid_size;
     for (const std::string& id : tiles ? change.removed : change.files.removed) in_flight_.erase(id);
-    if (tiles)
+    if (tiles) {
       for (const TileCloud& tile : change.added) enter(tile.id, change.grid_size);
-    else
-      for (const std::string& id : change.files.added) enter(id, change.grid_size);
+      continue;
+    }
+    const bool keep_held = keepsHeldTiles(change.files, change.grid_size);  // the held tiles are not read again
+    for (const std::string& id : change.files.added)
+      if (!keep_held || !tiles_.count(id)) enter(id, change.grid_size);
   }
 }
 

@@ -4,12 +4,16 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <random>
 #include <string>
+#include <thread>
 #include <tuple>
 #include <vector>
 
@@ -254,6 +258,54 @@ TEST(TileFiles, AMissingDirectoryOrAnUnannouncedNewRevisionKeepsTheLoadedMap) {
   EXPECT_TRUE(worker.takeErrors().empty());
   gpl::NdtTarget reference{gpl::VoxelMapParams()};
   reference.setTarget(moved);
+  expectExactlyEqual(*worker.takeReady(), *reference.snapshot());
+}
+
+TEST(TileFiles, AResetOfTheSameSourceReadsOnlyTheTilesNotHeldAndAnnouncesOnlyThem) {
+  // A respawned provider sends its whole window again as a reset. The held tiles stay (and are not in flight: the
+  // track goes on matching on them), those it no longer names leave, and a tile that failed before is read again.
+  TiledWorld w(2.0);
+  gpl::MapUpdateWorker worker{gpl::VoxelMapParams()};
+  const std::string missing = w.dir.path + "/" + w.ids[3] + ".pcd";
+  ASSERT_EQ(std::rename(missing.c_str(), (missing + ".away").c_str()), 0);
+  worker.submit(change(w.dir.path, true, std::vector<std::string>(w.ids.begin(), w.ids.begin() + 10), {}, w.s));
+  worker.waitIdle();
+  ASSERT_EQ(worker.takeErrors().size(), 1u);  // the missing tile
+  ASSERT_EQ(worker.stats().tiles, 9u);
+  while (worker.takeSnapshot()) {
+  }
+  const std::size_t read_before = worker.stats().tiles_read;
+
+  // The missing tile is back; the last tile of the new window comes through a FIFO, so the change stays in progress
+  // until this test writes it.
+  ASSERT_EQ(std::rename((missing + ".away").c_str(), missing.c_str()), 0);
+  const std::string fifo = w.dir.path + "/" + w.ids[12] + ".pcd";
+  ASSERT_EQ(std::remove(fifo.c_str()), 0);
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  const std::vector<std::string> window(w.ids.begin() + 2, w.ids.begin() + 13);
+  worker.submit(change(w.dir.path, true, window, {}, w.s));
+  std::optional<gpl::MapSnapshot> announced;
+  for (int i = 0; i < 1000 && !announced; ++i) {
+    announced = worker.takeSnapshot();
+    if (!announced) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_TRUE(announced.has_value()) << "no snapshot while the change waits on the FIFO";
+  std::vector<gpl::TileKey> expected;
+  for (const int i : {3, 10, 11, 12}) expected.push_back(gpl::tileKeyOfStem(w.ids[i], w.s));
+  std::vector<gpl::TileKey> in_flight = announced->in_flight.keys;
+  const auto order = [](const gpl::TileKey& a, const gpl::TileKey& b) {
+    return std::tie(a.i, a.j) < std::tie(b.i, b.j);
+  };
+  std::sort(expected.begin(), expected.end(), order);
+  std::sort(in_flight.begin(), in_flight.end(), order);
+  EXPECT_EQ(in_flight, expected);
+  gpl::test::writeBinaryPcd(fifo, w.tiles.at(w.ids[12]));
+  worker.waitIdle();
+  EXPECT_TRUE(worker.takeErrors().empty());
+  EXPECT_EQ(worker.stats().tiles, window.size());
+  EXPECT_EQ(worker.stats().tiles_read - read_before, 4u);
+  gpl::NdtTarget reference{gpl::VoxelMapParams()};
+  reference.setTarget(concat(w.tiles, window));
   expectExactlyEqual(*worker.takeReady(), *reference.snapshot());
 }
 
