@@ -6,6 +6,7 @@
 #     the package, whose directory rostest walks) and reused while it exists (`make clean` removes it);
 #  2. Debian's ROS 1 packages for package.xml's ROS keys (debian_ros_packages.txt) and the apt packages that
 #     rosdep resolves for package.xml's system keys (tools/check_rosdep.py), then requirements.txt with pip;
+#     (`--prepare` stops here: .ci/run prepares the root while Debian 12 builds);
 #  3. the checkout's files copied into a catkin workspace's src/, and inside.sh run there: catkin_make with g++-9
 #     and tests on, every gtest, pytest and rostest, catkin_make install and a tracking run from the install space.
 set -euo pipefail
@@ -119,6 +120,10 @@ make_root
 trap unmount_root EXIT
 mount_root
 install_packages
+if [[ ${1:-} == --prepare ]]; then  # .ci/run: the root and its packages only, beside the Debian 12 build
+  log "root ready"
+  exit 0
+fi
 copy_checkout
 log "catkin workspace /ws in the root: build, test, install"
 in_root bash /ws/src/grid_puzzle_localization/tools/noetic_era/inside.sh
