@@ -214,6 +214,8 @@ class MapUpdateWorker {
   // The map store of `url` at `revision` (opened, or its index polled, as needed); throws std::invalid_argument
   // when it cannot be opened or the server's index is of another revision.
   MapStore& storeAt(const std::string& url, const std::string& revision);
+  // The change names the directory (or URL) and index revision the held tiles came from.
+  bool fromHeldSource(const TileFileChange& change) const;
   // A reset of the source, tile side and index revision the held tiles came from: they stay, only the rest is read.
   bool keepsHeldTiles(const TileFileChange& change, double grid_size) const;
   // The window tiles of `batch` not loaded yet (in_flight_), before it is applied.

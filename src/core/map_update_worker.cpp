@@ -390,7 +390,7 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
   if (!remote && !isDirectory(change.dir))
     throw std::invalid_argument("tile directory '" + change.dir + "' does not exist; keeping the " +
                                 std::to_string(tiles_.size()) + " tiles loaded (check the provider's tiles/dir)");
-  const bool same_source = change.dir == tile_dir_ && change.index_revision == index_revision_;
+  const bool same_source = fromHeldSource(change);
   if (!change.reset && !same_source)
     throw std::invalid_argument("tile directory '" + change.dir + "' (index revision '" + change.index_revision +
                                 "') is not the one the loaded tiles came from ('" + tile_dir_ + "', revision '" +
@@ -521,9 +521,12 @@ void MapUpdateWorker::applyTileFiles(NdtTarget& target, double grid_size, const 
   fold();
 }
 
+bool MapUpdateWorker::fromHeldSource(const TileFileChange& change) const {
+  return change.dir == tile_dir_ && change.index_revision == index_revision_;
+}
+
 bool MapUpdateWorker::keepsHeldTiles(const TileFileChange& change, double grid_size) const {
-  return change.reset && !tiles_.empty() && grid_size == tile_size_ && change.dir == tile_dir_ &&
-         change.index_revision == index_revision_;
+  return change.reset && !tiles_.empty() && grid_size == tile_size_ && fromHeldSource(change);
 }
 
 void MapUpdateWorker::planInFlight(const std::deque<MapChange>& batch) {
